@@ -1,0 +1,62 @@
+# smc — make targets. `make demo` and `make test` work on a fresh clone: they create .venv
+# and install what they need, Debian libraries included (as root; otherwise they print
+# the apt-get line to run and stop).
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+SMC := $(VENV)/bin/smc
+export MUJOCO_GL ?= egl
+export PYOPENGL_PLATFORM ?= egl
+# Debian packages: libusb for open3d, Mesa EGL for headless rendering, Xvfb + xdotool +
+# GLFW for the viewer test.
+DEB_PKGS := libusb-1.0-0 libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri libglfw3 xvfb xdotool
+
+.PHONY: setup system-deps test test-fast demo bench sample-logs lint clean
+
+$(VENV)/.installed: pyproject.toml
+	@$(MAKE) --no-print-directory system-deps
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[dev]'
+	touch $@
+
+setup: $(VENV)/.installed
+
+system-deps:
+	@missing=""; for p in $(DEB_PKGS); do \
+	  dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q "install ok installed" || missing="$$missing $$p"; \
+	done; \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" = 0 ]; then \
+	    echo "installing Debian packages:$$missing"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
+	  else \
+	    echo "smc needs Debian packages; run:"; \
+	    echo "  sudo apt-get update && sudo apt-get install -y$$missing"; \
+	    exit 1; \
+	  fi; \
+	fi
+
+test: setup
+	$(PY) -m pytest -q
+
+test-fast: setup
+	$(PY) -m pytest -q -m "not slow"
+
+demo: setup
+	$(PY) -m smccli.demo
+
+sample-logs: setup
+	$(PY) -m smccli.sample_logs
+
+bench: setup
+	$(PY) -m smccli.bench
+
+lint: setup
+	$(VENV)/bin/ruff check smccli tests
+	$(VENV)/bin/ruff format --check smccli tests
+	$(VENV)/bin/mypy smccli
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache

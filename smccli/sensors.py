@@ -1,0 +1,83 @@
+"""Sensor readings and commands shared by the simulator, the logs, perception and replay.
+
+Times are simulation seconds (float) in memory and integer nanoseconds in logs.
+The arm's point of interest (POI) is the end-effector site: ``[x, y, z, yaw]`` in the
+world frame [m, m, m, rad], the gripper pointing down; the gripper opening is in [0, 1]
+(1 = fully open).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True, slots=True)
+class PoiCommand:
+    """What an operator (or the tree) asks the Cartesian controller for."""
+
+    t: float
+    """Simulation time [s]."""
+    target: np.ndarray
+    """POI target ``[x, y, z, yaw]``, shape (4,) [m, m, m, rad], world frame."""
+    gripper: float
+    """Gripper opening command in [0, 1], 1 = open."""
+
+
+@dataclass(frozen=True, slots=True)
+class JointState:
+    """Robot joint readings at one instant."""
+
+    t: float
+    """Simulation time [s]."""
+    names: tuple[str, ...]
+    """Joint names, length n."""
+    position: np.ndarray
+    """Joint positions, shape (n,) [rad or m]."""
+    velocity: np.ndarray
+    """Joint velocities, shape (n,) [rad/s or m/s]."""
+    effort: np.ndarray
+    """Actuator forces, shape (n,) [N·m or N]."""
+
+
+@dataclass(frozen=True, slots=True)
+class CameraFrame:
+    """One RGB-D image with what is needed to lift it into the world frame."""
+
+    t: float
+    """Simulation time [s]."""
+    rgb: np.ndarray
+    """Colour image, shape (H, W, 3) uint8, RGB order."""
+    depth: np.ndarray
+    """Depth along the optical axis, shape (H, W) float32 [m]; 0 or inf where nothing was hit."""
+    K: np.ndarray
+    """Pinhole intrinsics, shape (3, 3) [px]."""
+    T_world_camera: np.ndarray
+    """Camera pose in the world, shape (4, 4); optical frame: x right, y down, z forward."""
+    frame_id: str = "camera"
+
+
+@dataclass(frozen=True, slots=True)
+class SaliencyMark:
+    """A saliency marker: the operator's button or an automatic detector."""
+
+    t: float
+    """Simulation time [s]."""
+    source: str
+    """``"operator"`` or ``"auto"``."""
+    label: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class RobotGeometry:
+    """The robot's own collision shapes at one instant, for removing its points from clouds.
+
+    Computed from the robot's kinematic model and joint readings (allowed: it is the
+    robot's own body, not simulator knowledge of the objects).
+    """
+
+    centers: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    """Centres of bounding spheres, shape (m, 3) [m], world frame."""
+    radii: np.ndarray = field(default_factory=lambda: np.zeros((0,)))
+    """Radii of those spheres, shape (m,) [m]."""
