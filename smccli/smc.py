@@ -1,0 +1,192 @@
+"""Sensory-Motor Contingencies (paper 3.7, eq. 40): salient perceptions + salient action.
+
+An SMC is extracted from one fragment [t0, t1] of a demonstration:
+
+- salient perceptions (3.3) are read at t0, the decision point: the scale's weight (SI,
+  always salient) and the object cluster (ML) nearest the POI at t1, if within epsilon;
+- the salient action (3.4) is the commanded POI path over [t0, t1] as a DMP, its goal
+  stored in the salient object's frame when there is one (else in the world), and the
+  gripper command at both ends (a discrete event, not a DMP dimension).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from smccli import dmp as dmp_mod
+from smccli.dmp import Dmp
+from smccli.perception import Cluster
+
+
+@dataclass(frozen=True, slots=True)
+class SalientPerceptions:
+    """The salient subset ^S P^{i,j} of a fragment's perceptions (eq. 16)."""
+
+    cluster: Cluster | None
+    """ML: the object cluster nearest the POI at the fragment's end (eq. 21-22), if any."""
+    weight: float | None
+    """SI: the scale reading at the decision point [kg]; None when the scene has no scale."""
+
+
+@dataclass(frozen=True, slots=True)
+class Action:
+    """The salient action ^S A^{i,j}(omega, x_s, x_f, tau) (eq. 27)."""
+
+    dmp: Dmp
+    """Commanded POI path [x, y, z, yaw] over the fragment, as a DMP (eq. 28)."""
+    goal_frame: str
+    """``"object"``: ``goal`` is in the salient cluster's frame; ``"world"``: absolute."""
+    goal: np.ndarray
+    """POI goal x_f, shape (4,): [dx, dy, dz, dyaw] in the object's yawed frame [m, rad],
+    or [x, y, z, yaw] in the world [m, rad]."""
+    gripper_start: float
+    """Gripper command at the fragment's start, in [0, 1] (1 = open)."""
+    gripper_end: float
+    """Gripper command at the fragment's end, in [0, 1]."""
+
+    @property
+    def event(self) -> str:
+        """The gripper event of the action: ``close``, ``open`` or ``none``."""
+        if self.gripper_start >= 0.5 > self.gripper_end:
+            return "close"
+        if self.gripper_start < 0.5 <= self.gripper_end:
+            return "open"
+        return "none"
+
+
+@dataclass(frozen=True, slots=True)
+class Source:
+    """Where an SMC came from: a fragment of a log."""
+
+    log: str
+    """File name of the log (informational)."""
+    sha256: str
+    """sha256 of the log file (hex)."""
+    t0: float
+    """Fragment start [s]."""
+    t1: float
+    """Fragment end [s]."""
+
+
+@dataclass(frozen=True, slots=True)
+class Smc:
+    """S^{i,j} = (^S P^{i,j}, ^S A^{i,j}) (eq. 40)."""
+
+    perception: SalientPerceptions
+    action: Action
+
+
+def wrap_angle(a: float, period: float = 2 * math.pi) -> float:
+    """``a`` wrapped into [-period/2, period/2) [rad]."""
+    return float((a + period / 2) % period - period / 2)
+
+
+def object_yaw(cluster: Cluster) -> float:
+    """Yaw that defines the object's frame: 0 for round footprints, where yaw is undefined."""
+    return 0.0 if cluster.yaw_period <= 0 else float(cluster.yaw)
+
+
+def goal_in_object(goal_world: np.ndarray, cluster: Cluster) -> np.ndarray:
+    """World POI goal [x, y, z, yaw] -> [dx, dy, dz, dyaw] in the cluster's yawed frame."""
+    yaw = object_yaw(cluster)
+    c, s = math.cos(-yaw), math.sin(-yaw)
+    d = goal_world[:3] - cluster.centroid
+    return np.array([c * d[0] - s * d[1], s * d[0] + c * d[1], d[2],
+                     wrap_angle(goal_world[3] - yaw)])
+
+
+def goal_from_object(goal_obj: np.ndarray, cluster: Cluster, near_yaw: float) -> np.ndarray:
+    """Contingent action mapping of the goal (eq. 38-39): object-frame goal -> world.
+
+    The footprint's symmetry (``yaw_period``) and the parallel gripper's (pi) leave several
+    equivalent goal yaws; the one nearest ``near_yaw`` (the current POI yaw) is taken, so
+    the wrist turns as little as possible. The offset turns with the chosen object yaw.
+    """
+    base = object_yaw(cluster)
+    period = cluster.yaw_period if cluster.yaw_period > 0 else math.pi
+    best: tuple[float, float, float] | None = None
+    for k_obj in range(-4, 5):
+        obj_yaw = base + k_obj * period
+        if cluster.yaw_period <= 0 and k_obj != 0:
+            continue
+        for k_grip in range(-2, 3):
+            yaw = obj_yaw + goal_obj[3] + k_grip * math.pi
+            dist = abs(yaw - near_yaw)
+            if best is None or dist < best[0] - 1e-9:
+                best = (dist, yaw, obj_yaw)
+    assert best is not None
+    _, yaw, obj_yaw = best
+    c, s = math.cos(obj_yaw), math.sin(obj_yaw)
+    dx, dy, dz = goal_obj[:3]
+    centre = cluster.centroid
+    return np.array([centre[0] + c * dx - s * dy, centre[1] + s * dx + c * dy, centre[2] + dz,
+                     yaw])
+
+
+# --- JSON (no pickle: every value is a list of floats, a number or a string) -------------
+
+
+def _to_json(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    if isinstance(value, tuple):
+        return [_to_json(v) for v in value]
+    return value
+
+
+def cluster_to_dict(cluster: Cluster) -> dict[str, Any]:
+    """JSON form of a cluster."""
+    return {f.name: _to_json(getattr(cluster, f.name)) for f in dataclasses.fields(cluster)}
+
+
+def cluster_from_dict(data: dict[str, Any]) -> Cluster:
+    """Inverse of :func:`cluster_to_dict`; arrays come back as float arrays."""
+    kwargs: dict[str, Any] = {}
+    for f in dataclasses.fields(Cluster):
+        v = data[f.name]
+        kwargs[f.name] = np.asarray(v, dtype=float) if isinstance(v, list) else v
+    return Cluster(**kwargs)
+
+
+def smc_to_dict(smc: Smc) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(perception, action) JSON objects of an SMC, as stored on a tree edge."""
+    p = smc.perception
+    a = smc.action
+    perception = {
+        "cluster": None if p.cluster is None else cluster_to_dict(p.cluster),
+        "weight": p.weight,
+    }
+    action = {
+        "event": a.event,
+        "goal_frame": a.goal_frame,
+        "goal": _to_json(a.goal),
+        "gripper_start": a.gripper_start,
+        "gripper_end": a.gripper_end,
+        "dmp": dmp_mod.to_dict(a.dmp),
+    }
+    return perception, action
+
+
+def smc_from_dict(perception: dict[str, Any], action: dict[str, Any]) -> Smc:
+    """Inverse of :func:`smc_to_dict`."""
+    cluster = perception.get("cluster")
+    return Smc(
+        perception=SalientPerceptions(
+            cluster=None if cluster is None else cluster_from_dict(cluster),
+            weight=perception.get("weight"),
+        ),
+        action=Action(
+            dmp=dmp_mod.from_dict(action["dmp"]),
+            goal_frame=str(action["goal_frame"]),
+            goal=np.asarray(action["goal"], dtype=float),
+            gripper_start=float(action["gripper_start"]),
+            gripper_end=float(action["gripper_end"]),
+        ),
+    )
