@@ -13,12 +13,17 @@ Formulation (see docs/dmp.md for the measurements behind it):
 * **Moving-target DMP.** On normalised time ``s = t / tau`` in [0, 1], with phase
   ``x = exp(-alpha s)``, the canonical path is ``c = b + e``: ``b`` is the min-jerk line
   from 0 to the canonical goal and ``e`` obeys the spring-damper with the learned forcing
-  term, ``e'' = -K e - D e' + f(x)``. Equivalently the spring pulls towards the moving
-  target ``b(s)`` instead of a fixed goal, so the heavily overdamped K 90 / D 60 (damping
-  ratio 3.2) no longer lags behind a moved goal: ``e`` does not depend on the goal at all.
-* **Goal-converging correction.** The residual ``e(1)`` of the fitted forcing term
-  (a fraction of a millimetre) is removed with a min-jerk blend, so the rollout ends on the
-  goal to rounding error.
+  term, ``e'' = -K e - D e' + f(x)``. That is ``c'' = K (b - c) - D (c' - b') + b'' + f``:
+  the spring pulls towards the moving target ``b(s)`` instead of a fixed goal, so the
+  heavily overdamped K 90 / D 60 (damping ratio 3.2) no longer lags behind a moved goal
+  (the textbook form misses by 22 % of the goal shift at s = 1); ``e`` does not depend on
+  the goal at all.
+* **Fit in trajectory space.** ``e`` is linear in the weights, so they are the ridge
+  least-squares fit of the rollout from rest to the demonstration's ``e``; no second
+  derivative of a noisy demonstration is taken.
+* **Goal-converging correction.** The residual ``e(1)`` of the fitted forcing term (about
+  1e-4 mm on a smooth demonstration) is removed with a min-jerk blend, so the rollout ends
+  on the goal to rounding error.
 """
 
 from __future__ import annotations
@@ -176,8 +181,12 @@ def fit(t: np.ndarray, y: np.ndarray, params: DmpParams = DmpParams(), *,
     n_pos = y.shape[1] - 1 if n_pos is None else n_pos
     if not 0 <= n_pos <= y.shape[1]:
         raise ValueError(f"fit: n_pos must be in [0, {y.shape[1]}], got {n_pos}")
-    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(y)) and np.all(np.diff(t) > 0)):
-        raise LogError("DMP demonstration: expected finite values and strictly increasing times")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(y)) and np.all(np.diff(t) >= 0)):
+        raise LogError("DMP demonstration: expected finite values and non-decreasing times")
+    keep = np.append(np.diff(t) > 0, True)  # samples sharing a time: the last one wins
+    t, y = t[keep], y[keep]
+    if len(t) < 2:
+        raise LogError("DMP demonstration: expected a duration > 0, all samples share one time")
     duration = float(t[-1] - t[0])
     s = np.linspace(0.0, 1.0, max(int(round(duration / params.dt)), 2) + 1)
     yr = np.stack([np.interp(t[0] + s * duration, t, y[:, i]) for i in range(y.shape[1])], 1)

@@ -239,8 +239,12 @@ def test_merge_of_similar_dmps_stays_close_to_both():
     assert rms(y_m[:, :3], rollout(a)[1][:, :3]) < 0.01
 
 
-def test_fit_rejects_time_going_backwards():
+def test_fit_rejects_time_going_backwards_and_keeps_the_last_of_equal_times():
     t, y = lift_and_place()
-    t[10] = t[9]
-    with pytest.raises(LogError):
+    t2, y2 = np.insert(t, 10, t[10]), np.insert(y, 10, y[10] + 0.05, axis=0)
+    assert np.array_equal(fit(t2, y2).weights, fit(t, y).weights)
+    t[10] = t[8]
+    with pytest.raises(LogError, match="non-decreasing"):
         fit(t, y)
+    with pytest.raises(LogError, match="duration"):
+        fit(np.zeros(3), y[:3])
