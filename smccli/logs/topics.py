@@ -1,0 +1,219 @@
+"""Topic table and message codecs: what each MCAP topic holds and how it is (de)serialised.
+
+Protobuf topics use the Foxglove well-known schemas (schema encoding ``protobuf``, schema
+data = a serialized FileDescriptorSet) so the log opens in Foxglove and in Rerun's MCAP
+importer. Our own topics are JSON (message encoding ``json``) with the JSON Schema from
+``schemas/`` as schema data (schema encoding ``jsonschema``).
+
+Times: seconds (float) in memory, integer nanoseconds in the log (``to_ns``).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
+from foxglove_schemas_protobuf.JointStates_pb2 import JointStates
+from foxglove_schemas_protobuf.LaserScan_pb2 import LaserScan
+from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+from google.protobuf.message import Message as ProtoMessage
+
+COMMAND = "/teleop/command"
+JOINT_STATES = "/robot/joint_states"
+POI = "/robot/poi"
+COLOR = "/camera/color"
+DEPTH = "/camera/depth"
+CALIBRATION = "/camera/calibration"
+TF = "/tf"
+SCAN = "/lidar/scan"
+POINTS = "/perception/points"
+WEIGHT = "/scale/weight"
+SALIENCY = "/saliency"
+GROUND_TRUTH = "/sim/ground_truth"
+DECISION = "/smc/decision"
+
+PROTO_TOPICS: dict[str, type[ProtoMessage]] = {
+    JOINT_STATES: JointStates,
+    POI: PoseInFrame,
+    COLOR: CompressedImage,
+    DEPTH: CompressedImage,
+    CALIBRATION: CameraCalibration,
+    TF: FrameTransforms,
+    SCAN: LaserScan,
+    POINTS: PointCloud,
+}
+"""Protobuf topic -> Foxglove message class."""
+
+JSON_TOPICS: dict[str, str] = {
+    COMMAND: "teleop_command",
+    WEIGHT: "weight",
+    SALIENCY: "saliency",
+    GROUND_TRUTH: "ground_truth",
+    DECISION: "smc_decision",
+}
+"""JSON topic -> schema file stem in ``schemas/`` (``<stem>.schema.json``)."""
+
+METADATA_NAME = "smc"
+WORLD = "world"
+DEPTH_SCALE = 1000.0
+"""Depth PNG units per metre: 16-bit millimetres, 0 = no return, range up to 65.535 m."""
+
+
+def to_ns(t: float) -> int:
+    """Simulation time [s] -> log time [ns]; rounding makes it deterministic."""
+    return int(round(t * 1e9))
+
+
+def schema_dir() -> Path:
+    """``schemas/`` beside the package (editable install) or inside it (wheel)."""
+    here = Path(__file__).resolve().parent.parent
+    for candidate in (here / "schemas", here.parent / "schemas"):
+        if candidate.is_dir():
+            return candidate
+    raise FileNotFoundError(f"schemas/ not found near {here}")
+
+
+@functools.cache
+def json_schema_bytes(topic: str) -> bytes:
+    """The JSON Schema file of a JSON topic, byte for byte as stored in the log."""
+    return (schema_dir() / f"{JSON_TOPICS[topic]}.schema.json").read_bytes()
+
+
+@functools.cache
+def json_schema_name(topic: str) -> str:
+    return str(json.loads(json_schema_bytes(topic))["title"])
+
+
+@functools.cache
+def json_validator(topic: str) -> Any:
+    import jsonschema  # only needed when writing
+
+    schema = json.loads(json_schema_bytes(topic))
+    return jsonschema.Draft202012Validator(schema)
+
+
+def encode_json(obj: Any) -> bytes:
+    """Deterministic JSON: sorted keys, no spaces; NaN/inf refused (not valid JSON)."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()
+
+
+def stamp(msg: Any, t_ns: int) -> None:
+    msg.timestamp.FromNanoseconds(t_ns)
+
+
+# --- rotations (quaternions are w, x, y, z) ---
+
+
+def yaw_to_quat(yaw: float) -> np.ndarray:
+    """Rotation about world z by ``yaw`` [rad] -> quaternion (4,) wxyz."""
+    return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+
+
+def quat_to_yaw(q: np.ndarray) -> float:
+    """Yaw [rad] of a quaternion wxyz (heading of the rotated x axis), in (-pi, pi]."""
+    w, x, y, z = q
+    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def matrix_to_quat(R: np.ndarray) -> np.ndarray:
+    """Rotation matrix (3, 3) -> unit quaternion (4,) wxyz with w >= 0 (Shepperd's method)."""
+    m = np.asarray(R, dtype=float)
+    tr = np.trace(m)
+    if tr > 0:
+        s = 2 * math.sqrt(1 + tr)
+        q = [s / 4, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2 * math.sqrt(1 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = [(m[2, 1] - m[1, 2]) / s, s / 4, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+    elif m[1, 1] > m[2, 2]:
+        s = 2 * math.sqrt(1 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, s / 4, (m[1, 2] + m[2, 1]) / s]
+    else:
+        s = 2 * math.sqrt(1 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, s / 4]
+    qa = np.array(q)
+    qa /= np.linalg.norm(qa)
+    return -qa if qa[0] < 0 else qa
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Quaternion (4,) wxyz -> rotation matrix (3, 3)."""
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def set_pose(pose: Any, position: np.ndarray, quat: np.ndarray) -> None:
+    """Fill a foxglove Pose (or the translation/rotation pair of a FrameTransform)."""
+    p = pose.position if hasattr(pose, "position") else pose.translation
+    o = pose.orientation if hasattr(pose, "orientation") else pose.rotation
+    p.x, p.y, p.z = (float(v) for v in position)
+    o.w, o.x, o.y, o.z = (float(v) for v in quat)
+
+
+def get_pose(pose: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Position (3,) and quaternion (4,) wxyz of a foxglove Pose or FrameTransform."""
+    p = pose.position if hasattr(pose, "position") else pose.translation
+    o = pose.orientation if hasattr(pose, "orientation") else pose.rotation
+    return np.array([p.x, p.y, p.z]), np.array([o.w, o.x, o.y, o.z])
+
+
+# --- images ---
+
+
+def encode_color(rgb: np.ndarray, jpeg_quality: int | None) -> tuple[str, bytes]:
+    """RGB (H, W, 3) uint8 -> (format, bytes): JPEG at ``jpeg_quality`` or lossless PNG if None."""
+    bgr = np.ascontiguousarray(rgb[..., ::-1])
+    if jpeg_quality is None:
+        ok, buf = cv2.imencode(".png", bgr)
+        fmt = "png"
+    else:
+        ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
+        fmt = "jpeg"
+    if not ok:
+        raise ValueError(f"cannot encode a colour image of shape {rgb.shape}")
+    return fmt, buf.tobytes()
+
+
+def encode_depth(depth: np.ndarray) -> bytes:
+    """Depth (H, W) [m] -> 16-bit PNG in millimetres; 0, inf, NaN and > 65.535 m become 0."""
+    d = np.nan_to_num(np.asarray(depth, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    mm = np.round(d * DEPTH_SCALE)
+    mm[(mm < 0) | (mm > 65535)] = 0
+    ok, buf = cv2.imencode(".png", mm.astype(np.uint16))
+    if not ok:
+        raise ValueError(f"cannot encode a depth image of shape {depth.shape}")
+    return buf.tobytes()
+
+
+def decode_image(data: bytes) -> np.ndarray | None:
+    """Compressed image bytes -> array as stored (colour comes back BGR, depth as uint16)."""
+    return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+
+
+def decode_color(data: bytes) -> np.ndarray | None:
+    img = decode_image(data)
+    if img is None or img.ndim != 3:
+        return None
+    return np.ascontiguousarray(img[..., 2::-1])
+
+
+def decode_depth(data: bytes) -> np.ndarray | None:
+    img = decode_image(data)
+    if img is None or img.ndim != 2:
+        return None
+    return (img.astype(np.float32) / np.float32(DEPTH_SCALE)).astype(np.float32)
