@@ -1,0 +1,428 @@
+"""Scenes: an MJCF model (table, camera, robot) plus a scene file (YAML) naming the objects.
+
+The objects are built from the scene file with ``mujoco.MjSpec`` so their look, mass and pose
+have one source of truth. A :class:`Scene` carries the flattened, self-contained MJCF text of
+the whole model, so a log can embed it and :func:`load_scene_from_text` can rebuild the scene
+without the original files.
+
+World frame: origin at the robot's base on the table top (z = 0), x away from the robot, z up.
+An object's pose is that of its bounding-box centre: ``(x, y, z, yaw)`` [m, m, m, rad].
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+import yaml
+
+from smccli.errors import SceneError
+
+SCENES_DIR = Path(__file__).parent / "scenes"
+SHAPES = ("box", "cylinder", "pyramid", "open_box", "scale")
+RELATIONS = ("on_top_of", "inside")
+PYRAMID_STEPS = 3
+"""A pyramid is approximated by this many stacked boxes (no meshes offline)."""
+
+Layout = dict[str, tuple[float, float, float, float]]
+"""Object name -> pose ``(x, y, z, yaw)`` [m, m, m, rad] of its bounding-box centre."""
+
+
+@dataclass(frozen=True, slots=True)
+class ObjectSpec:
+    """One object of a scene, as the scene file describes it."""
+
+    name: str
+    """Body name in the model."""
+    shape: str
+    """One of :data:`SHAPES`."""
+    size: tuple[float, float, float]
+    """Full extents of the bounding box along the object's x, y, z [m] (cylinder: x = y = diameter)."""
+    rgba: tuple[float, float, float, float]
+    """Colour, each in [0, 1]."""
+    mass: float
+    """Mass [kg] (for ``scale``: of the platform)."""
+    pose: tuple[float, float, float, float]
+    """Nominal pose ``(x, y, z, yaw)`` of the bounding-box centre [m, m, m, rad]."""
+    range_x: tuple[float, float]
+    """Randomisation range of x [m]; equal bounds mean fixed."""
+    range_y: tuple[float, float]
+    """Randomisation range of y [m]."""
+    range_yaw: tuple[float, float]
+    """Randomisation range of yaw [rad]."""
+    fixed: bool = False
+    """Welded to the world (no free joint): scales, and anything the user wants static."""
+    wall: float = 0.01
+    """Wall and floor thickness of an ``open_box`` [m]."""
+
+    @property
+    def footprint_radius(self) -> float:
+        """Radius of the circle circumscribing the object's footprint [m]."""
+        return 0.5 * math.hypot(self.size[0], self.size[1])
+
+
+@dataclass(frozen=True, slots=True)
+class Condition:
+    """``object`` rests ``relation`` (on top of / inside) ``target``."""
+
+    object: str
+    """Name of the object that was moved."""
+    relation: str
+    """One of :data:`RELATIONS`."""
+    target: str
+    """Name of the object it must rest on or in."""
+
+
+@dataclass(frozen=True, slots=True)
+class SuccessCriterion:
+    """A task's success: any ``any_of`` condition holds and no ``none_of`` condition holds."""
+
+    task: str
+    """Task name, e.g. ``cube_on_green``."""
+    any_of: tuple[Condition, ...]
+    """At least one of these must hold."""
+    none_of: tuple[Condition, ...] = ()
+    """None of these may hold (e.g. the heavy object in the light bin)."""
+
+
+@dataclass(frozen=True, slots=True)
+class CameraSpec:
+    """The RGB-D sensor camera."""
+
+    name: str
+    """MJCF camera name."""
+    width: int
+    """Image width [px]."""
+    height: int
+    """Image height [px]."""
+    rate: float
+    """Frame rate [Hz]."""
+
+
+@dataclass(frozen=True, slots=True)
+class Scene:
+    """A built-in or user scene: model text, scene file text and what they declare."""
+
+    name: str
+    """Scene name (``pick_place``, …)."""
+    yaml_path: Path | None
+    """The scene file, or None when rebuilt from text (a log)."""
+    yaml_text: str
+    """The scene file's text, verbatim."""
+    mjcf: str
+    """Flattened self-contained MJCF of the whole model, objects included."""
+    digest: str
+    """``sha256:<hex>`` of the scene file text and the MJCF text."""
+    objects: tuple[ObjectSpec, ...]
+    """The objects, in scene-file order."""
+    camera: CameraSpec
+    """The sensor camera."""
+    scale: str | None
+    """Name of the scale object (its force sensor is ``<name>_force``), or None."""
+    poi: str
+    """Name of the POI site (the end-effector)."""
+    success: tuple[SuccessCriterion, ...]
+    """One criterion per task."""
+    description: str = ""
+    """One line for ``smc scenes``."""
+
+    def object(self, name: str) -> ObjectSpec:
+        """The object called ``name``; SceneError listing the valid names otherwise."""
+        for obj in self.objects:
+            if obj.name == name:
+                return obj
+        valid = ", ".join(o.name for o in self.objects)
+        raise SceneError(f"scene {self.name}: no object {name!r} (objects: {valid})")
+
+    def model(self) -> mujoco.MjModel:
+        """Compile the MJCF into a fresh model."""
+        try:
+            return mujoco.MjModel.from_xml_string(self.mjcf)
+        except ValueError as exc:
+            raise SceneError(f"scene {self.name}: MJCF does not compile: {exc}") from exc
+
+
+def builtin_names() -> list[str]:
+    """Names of the built-in scenes."""
+    return sorted(p.parent.name for p in SCENES_DIR.glob("*/scene.yaml"))
+
+
+def list_scenes() -> list[Scene]:
+    """All built-in scenes."""
+    return [load_scene(n) for n in builtin_names()]
+
+
+def load_scene(name_or_path: str | Path) -> Scene:
+    """A built-in scene by name, or a user scene by the path of its ``scene.yaml``."""
+    text = str(name_or_path)
+    if text in builtin_names():
+        path = SCENES_DIR / text / "scene.yaml"
+    else:
+        path = Path(name_or_path)
+        if not path.is_file():
+            raise SceneError(
+                f"{text}: no such scene (built-in scenes: {', '.join(builtin_names())}; "
+                "or give the path of a scene.yaml)"
+            )
+    yaml_text = path.read_text()
+    raw = _parse_yaml(yaml_text, str(path))
+    mjcf_file = path.parent / str(raw.get("mjcf", "scene.xml"))
+    if not mjcf_file.is_file():
+        raise SceneError(f"{path}: MJCF file {mjcf_file} not found")
+    try:
+        spec = mujoco.MjSpec.from_file(str(mjcf_file))
+    except ValueError as exc:
+        raise SceneError(f"{mjcf_file}: invalid MJCF: {exc}") from exc
+    scene = _build(raw, yaml_text, spec, str(path))
+    return _replace_path(scene, path)
+
+
+def load_scene_from_text(yaml_text: str, mjcf_text: str) -> Scene:
+    """Rebuild a scene from the texts a log embeds (``Scene.yaml_text``, ``Scene.mjcf``)."""
+    raw = _parse_yaml(yaml_text, "<embedded scene.yaml>")
+    try:
+        mujoco.MjModel.from_xml_string(mjcf_text)
+    except ValueError as exc:
+        raise SceneError(f"<embedded MJCF>: does not compile: {exc}") from exc
+    objects, camera, scale, poi, success = _parse(raw, "<embedded scene.yaml>")
+    return Scene(
+        name=str(raw["name"]),
+        yaml_path=None,
+        yaml_text=yaml_text,
+        mjcf=mjcf_text,
+        digest=_digest(yaml_text, mjcf_text),
+        objects=objects,
+        camera=camera,
+        scale=scale,
+        poi=poi,
+        success=success,
+        description=str(raw.get("description", "")),
+    )
+
+
+def nominal_layout(scene: Scene) -> Layout:
+    """Every object at its nominal pose."""
+    return {o.name: tuple(o.pose) for o in scene.objects}  # type: ignore[misc]
+
+
+def sample_layout(scene: Scene, rng: np.random.Generator, *, max_tries: int = 1000) -> Layout:
+    """Draw each object's x, y, yaw uniformly from its ranges; redraw while footprints overlap.
+
+    Footprints are the circles circumscribing the objects (conservative), with 1 cm between.
+    """
+    gap = 0.01
+    for _ in range(max_tries):
+        layout: Layout = {}
+        for o in scene.objects:
+            x = float(rng.uniform(*o.range_x)) if o.range_x[0] < o.range_x[1] else o.range_x[0]
+            y = float(rng.uniform(*o.range_y)) if o.range_y[0] < o.range_y[1] else o.range_y[0]
+            lo, hi = o.range_yaw
+            yaw = float(rng.uniform(lo, hi)) if lo < hi else lo
+            layout[o.name] = (x, y, o.pose[2], yaw)
+        if not _overlaps(scene, layout, gap):
+            return layout
+    raise SceneError(
+        f"scene {scene.name}: no overlap-free layout in {max_tries} draws (ranges too tight)"
+    )
+
+
+def _overlaps(scene: Scene, layout: Layout, gap: float) -> bool:
+    objs = scene.objects
+    for i, a in enumerate(objs):
+        for b in objs[i + 1 :]:
+            pa, pb = layout[a.name], layout[b.name]
+            if math.hypot(pa[0] - pb[0], pa[1] - pb[1]) < (
+                a.footprint_radius + b.footprint_radius + gap
+            ):
+                return True
+    return False
+
+
+# --- scene file parsing ---------------------------------------------------------------
+
+
+def _parse_yaml(text: str, where: str) -> dict[str, Any]:
+    try:
+        raw = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise SceneError(f"{where}: not valid YAML: {exc}") from exc
+    if not isinstance(raw, dict) or "name" not in raw or "objects" not in raw:
+        raise SceneError(f"{where}: expected a mapping with 'name' and 'objects'")
+    return raw
+
+
+def _floats(value: Any, n: int, what: str, where: str) -> tuple[float, ...]:
+    try:
+        out = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        out = ()
+    if len(out) != n:
+        raise SceneError(f"{where}: {what} must be {n} numbers, found {value!r}")
+    return out
+
+
+def _parse(
+    raw: Mapping[str, Any], where: str
+) -> tuple[tuple[ObjectSpec, ...], CameraSpec, str | None, str, tuple[SuccessCriterion, ...]]:
+    objects = []
+    for i, o in enumerate(raw["objects"]):
+        name = o.get("name") if isinstance(o, dict) else None
+        if not name:
+            raise SceneError(f"{where}: objects[{i}] has no name")
+        at = f"{where}: object {name}"
+        shape = o.get("shape")
+        if shape not in SHAPES:
+            raise SceneError(f"{at}: shape {shape!r} unknown (shapes: {', '.join(SHAPES)})")
+        pose = _floats(o.get("pose"), 4, "pose [x, y, z, yaw]", at)
+        rng = o.get("range") or {}
+        objects.append(
+            ObjectSpec(
+                name=str(name),
+                shape=shape,
+                size=_floats(o.get("size"), 3, "size [x, y, z]", at),  # type: ignore[arg-type]
+                rgba=_floats(o.get("rgba", [0.5, 0.5, 0.5, 1]), 4, "rgba", at),  # type: ignore[arg-type]
+                mass=float(o.get("mass", 0.1)),
+                pose=pose,  # type: ignore[arg-type]
+                range_x=_floats(rng.get("x", [pose[0]] * 2), 2, "range.x", at),  # type: ignore[arg-type]
+                range_y=_floats(rng.get("y", [pose[1]] * 2), 2, "range.y", at),  # type: ignore[arg-type]
+                range_yaw=_floats(rng.get("yaw", [pose[3]] * 2), 2, "range.yaw", at),  # type: ignore[arg-type]
+                fixed=bool(o.get("fixed", shape == "scale")),
+                wall=float(o.get("wall", 0.01)),
+            )
+        )
+    names = [o.name for o in objects]
+    sensors = raw.get("sensors") or {}
+    cam = sensors.get("camera") or {}
+    camera = CameraSpec(
+        name=str(cam.get("name", "sensor_camera")),
+        width=int(cam.get("width", 320)),
+        height=int(cam.get("height", 240)),
+        rate=float(cam.get("rate", 10.0)),
+    )
+    scale = sensors.get("scale")
+    if scale is not None and scale not in names:
+        raise SceneError(f"{where}: sensors.scale {scale!r} is not an object ({', '.join(names)})")
+    poi = str((raw.get("robot") or {}).get("poi", "poi"))
+    success = []
+    for task, crit in (raw.get("success") or {}).items():
+        conds: dict[str, tuple[Condition, ...]] = {}
+        for key in ("any_of", "none_of"):
+            items = []
+            for c in crit.get(key, []) or []:
+                cond = Condition(str(c.get("object")), str(c.get("relation")), str(c.get("target")))
+                if cond.relation not in RELATIONS:
+                    raise SceneError(
+                        f"{where}: success.{task}: relation {cond.relation!r} unknown "
+                        f"(relations: {', '.join(RELATIONS)})"
+                    )
+                for n in (cond.object, cond.target):
+                    if n not in names:
+                        raise SceneError(
+                            f"{where}: success.{task}: no object {n!r} (objects: {', '.join(names)})"
+                        )
+                items.append(cond)
+            conds[key] = tuple(items)
+        success.append(SuccessCriterion(str(task), conds["any_of"], conds["none_of"]))
+    return tuple(objects), camera, scale, poi, tuple(success)
+
+
+def _build(raw: Mapping[str, Any], yaml_text: str, spec: mujoco.MjSpec, where: str) -> Scene:
+    objects, camera, scale, poi, success = _parse(raw, where)
+    for obj in objects:
+        _add_object(spec, obj)
+    try:
+        spec.compile()
+    except ValueError as exc:
+        raise SceneError(f"{where}: model does not compile: {exc}") from exc
+    mjcf = spec.to_xml()
+    model = mujoco.MjModel.from_xml_string(mjcf)
+    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera.name) < 0:
+        raise SceneError(f"{where}: camera {camera.name!r} not in the MJCF")
+    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, poi) < 0:
+        raise SceneError(f"{where}: POI site {poi!r} not in the MJCF")
+    return Scene(
+        name=str(raw["name"]),
+        yaml_path=None,
+        yaml_text=yaml_text,
+        mjcf=mjcf,
+        digest=_digest(yaml_text, mjcf),
+        objects=objects,
+        camera=camera,
+        scale=scale,
+        poi=poi,
+        success=success,
+        description=str(raw.get("description", "")),
+    )
+
+
+def _replace_path(scene: Scene, path: Path) -> Scene:
+    from dataclasses import replace
+
+    return replace(scene, yaml_path=path)
+
+
+def _digest(yaml_text: str, mjcf_text: str) -> str:
+    h = hashlib.sha256()
+    h.update(yaml_text.encode())
+    h.update(b"\0")
+    h.update(mjcf_text.encode())
+    return "sha256:" + h.hexdigest()
+
+
+def _yaw_quat(yaw: float) -> list[float]:
+    return [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
+
+
+def _add_object(spec: mujoco.MjSpec, obj: ObjectSpec) -> None:
+    """Add ``obj`` as a body of primitives; free unless ``obj.fixed``."""
+    x, y, z, yaw = obj.pose
+    body = spec.worldbody.add_body(name=obj.name, pos=[x, y, z], quat=_yaw_quat(yaw))
+    if not obj.fixed:
+        body.add_freejoint(name=f"{obj.name}_joint")
+    sx, sy, sz = (s / 2 for s in obj.size)
+    box, cyl = mujoco.mjtGeom.mjGEOM_BOX, mujoco.mjtGeom.mjGEOM_CYLINDER
+    common = dict(rgba=list(obj.rgba), condim=4, friction=[1.2, 0.02, 0.002],
+                  solref=[0.004, 1], solimp=[0.95, 0.99, 0.001, 0.5, 2])
+    parts: list[tuple[Any, list[float], list[float]]] = []  # (type, half size, pos)
+    if obj.shape == "box":
+        parts = [(box, [sx, sy, sz], [0, 0, 0])]
+    elif obj.shape == "cylinder":
+        parts = [(cyl, [sx, sz, 0], [0, 0, 0])]
+    elif obj.shape == "pyramid":
+        # Stacked boxes shrinking towards the top; each step a third of the height.
+        h = sz * 2 / PYRAMID_STEPS
+        for k in range(PYRAMID_STEPS):
+            f = 1.0 - k / PYRAMID_STEPS
+            parts.append((box, [sx * f, sy * f, h / 2], [0, 0, -sz + h * (k + 0.5)]))
+    elif obj.shape == "open_box":
+        w = obj.wall / 2
+        parts = [
+            (box, [sx, sy, w], [0, 0, -sz + w]),
+            (box, [w, sy, sz], [sx - w, 0, 0]),
+            (box, [w, sy, sz], [-sx + w, 0, 0]),
+            (box, [sx - 2 * w, w, sz], [0, sy - w, 0]),
+            (box, [sx - 2 * w, w, sz], [0, -sy + w, 0]),
+        ]
+    elif obj.shape == "scale":
+        # A housing (part of the static body) and a platform body on top whose force sensor
+        # reads what rests on it; the platform is welded, so the reading is the static load.
+        body.add_geom(type=box, size=[sx, sy, sz * 0.6], pos=[0, 0, -sz * 0.4],
+                      rgba=[0.2, 0.2, 0.22, 1], mass=1.0)
+        plat = body.add_body(name=f"{obj.name}_platform", pos=[0, 0, sz * 0.6])
+        plat.add_geom(type=box, size=[sx * 0.95, sy * 0.95, sz * 0.4], mass=obj.mass, **common)
+        plat.add_site(name=f"{obj.name}_site", pos=[0, 0, 0])
+        spec.add_sensor(name=f"{obj.name}_force", type=mujoco.mjtSensor.mjSENS_FORCE,
+                        objtype=mujoco.mjtObj.mjOBJ_SITE, objname=f"{obj.name}_site")
+        return
+    total = sum(8 * s[0] * s[1] * s[2] if t == box else math.pi * s[0] ** 2 * 2 * s[1]
+                for t, s, _ in parts)
+    for i, (t, half, pos) in enumerate(parts):
+        vol = 8 * half[0] * half[1] * half[2] if t == box else math.pi * half[0] ** 2 * 2 * half[1]
+        body.add_geom(name=f"{obj.name}_geom{i}", type=t, size=half, pos=pos,
+                      mass=obj.mass * vol / total, **common)
