@@ -6,6 +6,7 @@ recorder (no summary, torn last chunk) still yields every whole chunk before the
 
 from __future__ import annotations
 
+import bisect
 import hashlib
 import io
 import json
@@ -365,12 +366,8 @@ class _Decoder:
 
 def _latest(series: list[tuple[int, np.ndarray]], t_ns: int) -> np.ndarray | None:
     """Value of the last entry at or before ``t_ns`` (series in time order)."""
-    best = None
-    for ts, v in series:
-        if ts > t_ns:
-            break
-        best = v
-    return best
+    i = bisect.bisect_right(series, t_ns, key=lambda e: e[0])
+    return series[i - 1][1] if i else None
 
 
 def _decode_points(t: float, msg: Any) -> PointCloudMsg:
