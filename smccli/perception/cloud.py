@@ -1,0 +1,149 @@
+"""Depth image -> coloured world-frame points -> crop -> table removal -> self-filter."""
+
+from __future__ import annotations
+
+import numpy as np
+import open3d as o3d
+
+from smccli.perception.params import PerceptionParams
+from smccli.sensors import CameraFrame, RobotGeometry
+
+
+def points_from_depth(frame: CameraFrame, max_depth: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
+    """Lift every valid depth pixel into the world frame.
+
+    Returns points, shape (n, 3) [m] in the world frame, and their colours, shape (n, 3)
+    uint8 RGB. Invalid pixels (0, inf, nan, beyond ``max_depth``) are dropped.
+    """
+    depth = np.asarray(frame.depth, dtype=np.float32)
+    h, w = depth.shape
+    K = np.asarray(frame.K, dtype=np.float64)
+    valid = np.isfinite(depth) & (depth > 0) & (depth < max_depth)
+    v, u = np.nonzero(valid)
+    z = depth[v, u].astype(np.float64)
+    # Pinhole back-projection in the optical frame (x right, y down, z forward); the skew
+    # term K[0, 1] is kept for generality.
+    y_n = (v - K[1, 2]) / K[1, 1]
+    x_n = (u - K[0, 2] - K[0, 1] * y_n) / K[0, 0]
+    p_cam = np.stack([x_n * z, y_n * z, z], axis=1)
+    T = np.asarray(frame.T_world_camera, dtype=np.float64)
+    points = p_cam @ T[:3, :3].T + T[:3, 3]
+    colors = np.asarray(frame.rgb)[v, u]
+    return points, colors
+
+
+def crop_mask(points: np.ndarray, params: PerceptionParams) -> np.ndarray:
+    """Points inside the axis-aligned workspace box, boolean mask of shape (n,)."""
+    lo = np.asarray(params.crop_min)
+    hi = np.asarray(params.crop_max)
+    return np.all((points >= lo) & (points <= hi), axis=1)
+
+
+def self_filter_mask(points: np.ndarray, robot: RobotGeometry | None) -> np.ndarray:
+    """Points outside every bounding sphere of the robot, boolean mask of shape (n,)."""
+    keep = np.ones(len(points), dtype=bool)
+    if robot is None or len(robot.radii) == 0:
+        return keep
+    centers = np.asarray(robot.centers, dtype=np.float64)
+    radii = np.asarray(robot.radii, dtype=np.float64)
+    # Check sphere by sphere: memory O(n) instead of O(n m), and cheap since m is small.
+    for c, r in zip(centers, radii, strict=True):
+        d2 = np.einsum("ij,ij->i", points - c, points - c)
+        keep &= d2 > r * r
+    return keep
+
+
+def fit_table_plane(points: np.ndarray, params: PerceptionParams) -> np.ndarray | None:
+    """Fit the table plane with RANSAC (open3d ``segment_plane``), refined by least squares.
+
+    Returns ``[a, b, c, d]`` with ``a x + b y + c z + d = 0``, unit normal pointing up
+    (+z), or None if no near-horizontal plane with enough support is found.
+    """
+    if len(points) < 3:
+        return None
+    # RANSAC cost grows with the points scored per iteration; a strided subsample finds
+    # the same plane (the table is most of the cloud) and the refinement uses all points.
+    stride = max(1, len(points) // params.plane_sample)
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[::stride]))
+    # open3d's RANSAC draws random samples; seeding makes the same frame give the same
+    # plane (the least-squares refinement below removes the remaining sampling jitter).
+    o3d.utility.random.seed(params.plane_seed)
+    plane, inliers = pcd.segment_plane(
+        distance_threshold=params.plane_distance,
+        ransac_n=3,
+        num_iterations=params.plane_iterations,
+    )
+    plane = np.asarray(plane, dtype=np.float64)
+    plane /= np.linalg.norm(plane[:3])
+    if plane[2] < 0:
+        plane = -plane
+    if np.arccos(np.clip(plane[2], -1.0, 1.0)) > params.plane_max_tilt or len(inliers) < 3:
+        return None  # the biggest plane is a wall or an object face: no table in view
+    # Least-squares refinement on the inliers: the plane through their mean, normal =
+    # direction of least variance.
+    dist = points @ plane[:3] + plane[3]
+    inl = points[np.abs(dist) < params.plane_distance]
+    mean = inl.mean(axis=0)
+    _, _, vt = np.linalg.svd(inl - mean, full_matrices=False)
+    normal = vt[2] if vt[2, 2] > 0 else -vt[2]
+    return np.r_[normal, -normal @ mean]
+
+
+def above_plane_mask(points: np.ndarray, plane: np.ndarray, margin: float) -> np.ndarray:
+    """Points more than ``margin`` [m] above the plane, boolean mask of shape (n,)."""
+    return points @ plane[:3] + plane[3] > margin
+
+
+def voxel_downsample(
+    points: np.ndarray, colors: np.ndarray, voxel: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Keep the first point of each occupied voxel (deterministic, order-preserving)."""
+    if voxel <= 0 or len(points) == 0:
+        return points, colors
+    keys = np.floor(points / voxel).astype(np.int64)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    first.sort()
+    return points[first], colors[first]
+
+
+def object_points(
+    frame: CameraFrame, robot: RobotGeometry | None, params: PerceptionParams
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The points standing on the table: lift, crop, downsample, remove the table, self-filter.
+
+    Returns (points (n, 3) [m], colours (n, 3) uint8, table plane ``[a, b, c, d]`` or None).
+    Without a table plane every cropped point is kept.
+    """
+    points, colors = points_from_depth(frame, params.max_depth)
+    keep = crop_mask(points, params)
+    points, colors = points[keep], colors[keep]
+    points, colors = voxel_downsample(points, colors, params.voxel_size)
+    plane = fit_table_plane(points, params)
+    if plane is not None:
+        keep = above_plane_mask(points, plane, params.plane_distance)
+        points, colors = points[keep], colors[keep]
+    # Self-filter last: the table is most of the cloud, so this tests far fewer points
+    # against the robot's spheres; the robot's few points do not sway the RANSAC plane.
+    keep = self_filter_mask(points, robot)
+    return points[keep], colors[keep], plane
+
+
+def cloud_from_frame(
+    frame: CameraFrame,
+    robot: RobotGeometry | None = None,
+    params: PerceptionParams | None = None,
+    *,
+    crop: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Coloured point cloud for visualisation: points (n, 3) [m] world frame, colours (n, 3) uint8.
+
+    With ``crop`` the workspace box and the self-filter are applied (the table is kept).
+    """
+    params = params or PerceptionParams()
+    points, colors = points_from_depth(frame, params.max_depth)
+    if crop:
+        keep = crop_mask(points, params)
+        points, colors = points[keep], colors[keep]
+        keep = self_filter_mask(points, robot)
+        points, colors = points[keep], colors[keep]
+    return points, colors

@@ -1,0 +1,283 @@
+"""Perception saliency (section 3.3): object clusters from real MuJoCo renders, distances, saliency.
+
+The scene is tests/perception_scene.py; ground truth is read only in assertions.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+from hypothesis.extra.numpy import arrays  # noqa: E402
+from perception_scene import (  # noqa: E402
+    OBJECTS,
+    TABLE_CENTER,
+    TABLE_HALF,
+    TABLE_TOP,
+    PerceptionScene,
+    random_layout,
+    separability,
+    spec_by_name,
+)
+
+from smccli.perception import (  # noqa: E402
+    DEFAULT_EPSILON,
+    Cluster,
+    PerceptionParams,
+    cloud_from_frame,
+    clusters_from_frame,
+    d_cluster,
+    d_histogram,
+    d_scalar,
+    hsv_histogram,
+    salient_cluster,
+)
+from smccli.sensors import CameraFrame  # noqa: E402
+
+T_HP = 0.1
+"""The paper's perception threshold."""
+
+
+@pytest.fixture(scope="module")
+def scene():
+    s = PerceptionScene()
+    yield s
+    s.close()
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(0)
+
+
+def _nearest(truth: dict[str, tuple[np.ndarray, float]], c: Cluster) -> str:
+    return min(truth, key=lambda n: np.linalg.norm(truth[n][0][:2] - c.centroid[:2]))
+
+
+def _yaw_error(a: float, b: float, period: float) -> float:
+    return abs((a - b + period / 2) % period - period / 2)
+
+
+# --- cloud -----------------------------------------------------------------------------
+
+
+def test_empty_table_lifts_onto_the_table_plane_and_has_no_clusters(scene):
+    scene.clear()
+    frame = scene.render()
+    points, colors = cloud_from_frame(frame)
+    assert points.shape[1] == 3 and colors.shape == points.shape and colors.dtype == np.uint8
+    assert len(points) > 0.5 * frame.depth.size  # the table fills most of the view
+    # Depth convention, K and T_world_camera together: the table top comes out flat at its
+    # height (the rest of the crop box holds the table's near face).
+    top = points[np.abs(points[:, 0] - TABLE_CENTER[0]) < TABLE_HALF[0] - 0.005]
+    assert len(top) > 0.8 * len(points)
+    assert np.abs(top[:, 2] - TABLE_TOP).max() < 1e-3
+    assert clusters_from_frame(frame, None) == ()
+
+
+def test_frame_without_valid_depth_gives_no_clusters():
+    frame = CameraFrame(
+        t=0.0,
+        rgb=np.zeros((4, 6, 3), np.uint8),
+        depth=np.full((4, 6), np.inf, np.float32),
+        K=np.array([[5.0, 0, 3], [0, 5.0, 2], [0, 0, 1]]),
+        T_world_camera=np.eye(4),
+    )
+    assert clusters_from_frame(frame, None) == ()
+    assert len(cloud_from_frame(frame)[0]) == 0
+
+
+# --- clusters: count, pose, extents --------------------------------------------------------
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_clusters_are_the_objects_with_their_poses_and_extents(scene, seed):
+    rng = np.random.default_rng(seed)
+    names = list(rng.choice([s.name for s in OBJECTS], size=5, replace=False))
+    scene.clear()
+    truth = {n: (scene.place(n, *p), p[2]) for n, p in random_layout(rng, names, 0.16).items()}
+    found = clusters_from_frame(scene.render(), None)
+
+    assert len(found) == len(names)
+    assert sorted(_nearest(truth, c) for c in found) == sorted(names)  # one cluster each
+    for c in found:
+        name = _nearest(truth, c)
+        spec = spec_by_name(name)
+        center, yaw = truth[name]
+        assert np.linalg.norm(c.centroid - center) < 0.01, name
+        # The table removal cuts the pyramid's sloped base (its footprint 6 mm up is 10 %
+        # smaller): allow a little more there.
+        tol = 0.015 if spec.kind == "pyramid" else 0.01
+        np.testing.assert_allclose(c.extents, spec.size, atol=tol, err_msg=name)
+        if spec.kind != "pyramid":
+            assert c.yaw_period == pytest.approx(spec.yaw_period), name
+        if spec.yaw_period == np.pi:
+            assert np.degrees(_yaw_error(c.yaw, yaw, np.pi)) < 5.0, name
+        assert -np.pi / 2 < c.yaw <= np.pi / 2
+        assert c.histogram.sum() == pytest.approx(1.0)
+
+
+def test_clusters_are_sorted_and_deterministic(scene, rng):
+    scene.clear()
+    for n, p in random_layout(rng, ["white_box", "orange_cube", "green_cylinder"]).items():
+        scene.place(n, *p)
+    frame = scene.render()
+    a = clusters_from_frame(frame, None)
+    b = clusters_from_frame(frame, None)
+    assert len(a) == 3
+    xs = [c.centroid[0] for c in a]
+    assert xs == sorted(xs)
+    for ca, cb in zip(a, b, strict=True):
+        np.testing.assert_array_equal(ca.centroid, cb.centroid)
+        np.testing.assert_array_equal(ca.histogram, cb.histogram)
+        assert ca.yaw == cb.yaw and ca.n_points == cb.n_points
+
+
+def test_self_filter_removes_the_arm_hanging_into_view(scene):
+    scene.clear()
+    truth = {
+        n: (scene.place(n, x, y, 0.3), 0.3)
+        for n, (x, y) in {"orange_cube": (0.45, -0.15), "blue_box": (0.65, 0.0)}.items()
+    }
+    scene.show_arm()
+    frame = scene.render()
+    without = clusters_from_frame(frame, None)
+    assert len(without) > len(truth)  # the arm's points stand on the table as a cluster
+    with_filter = clusters_from_frame(frame, scene.robot_geometry())
+    assert len(with_filter) == len(truth)
+    assert sorted(_nearest(truth, c) for c in with_filter) == sorted(truth)
+    points, _ = cloud_from_frame(frame, scene.robot_geometry())
+    g = scene.robot_geometry()
+    d = np.linalg.norm(points[:, None, :] - g.centers[None], axis=2)
+    assert (d > g.radii).all()
+
+
+def test_min_cluster_points_rejects_small_clusters(scene):
+    scene.clear()
+    scene.place("blue_box_small", 0.75, 0.25, 0.0)  # far: the fewest points
+    frame = scene.render()
+    (c,) = clusters_from_frame(frame, None)
+    params = dataclasses.replace(PerceptionParams(), min_cluster_points=c.n_points + 1)
+    assert clusters_from_frame(frame, None, params) == ()
+
+
+# --- separability (eq. 26, ML part) ----------------------------------------------------------
+
+
+def test_each_object_is_itself_from_any_pose_and_differs_from_the_others():
+    r = separability(n_poses=30, seed=1)
+    print(
+        f"within p99 {r['within_p99']:.3f} max {r['within_max']:.3f}; "
+        f"between p1 {r['between_p1']:.3f} min {r['between_min']:.3f}; "
+        f"{r['ms_per_frame']:.1f} ms/frame"
+    )
+    assert not any(r["missed"].values()), r["missed"]
+    assert r["within_max"] < T_HP, r["within_p99_by_object"]
+    assert r["between_min"] > T_HP, {k: v for k, v in r["between_min_by_pair"].items() if v < 0.2}
+
+
+# --- distances ---------------------------------------------------------------------------------
+
+_PARAMS = PerceptionParams()
+_hist = arrays(
+    np.float64, len(hsv_histogram(np.zeros((1, 3), np.uint8), _PARAMS)), elements=st.floats(0, 1)
+).filter(lambda h: h.sum() > 1e-3)
+_ext = arrays(np.float64, 3, elements=st.floats(0.005, 0.5))
+
+
+def _cluster(h: np.ndarray, e: np.ndarray) -> Cluster:
+    return Cluster(
+        centroid=np.zeros(3),
+        yaw=0.0,
+        yaw_period=np.pi,
+        extents=e,
+        histogram=h / h.sum(),
+        n_points=100,
+    )
+
+
+@settings(max_examples=200, deadline=None)
+@given(_hist, _hist, _ext, _ext)
+def test_d_cluster_is_symmetric_nonnegative_and_zero_on_identity(h1, h2, e1, e2):
+    a, b = _cluster(h1, e1), _cluster(h2, e2)
+    assert d_cluster(a, b) == pytest.approx(d_cluster(b, a), abs=1e-12)
+    assert d_cluster(a, b) >= 0.0
+    assert d_cluster(a, a) == 0.0
+    assert np.isfinite(d_cluster(a, b))
+
+
+def test_d_cluster_ignores_location():
+    h = np.ones(24) / 24
+    a = _cluster(h, np.array([0.05, 0.04, 0.03]))
+    b = dataclasses.replace(a, centroid=np.array([1.0, 2.0, 0.0]), yaw=1.0)
+    assert d_cluster(a, b) == 0.0
+
+
+def test_d_histogram_is_the_textbook_bhattacharyya():
+    p = np.array([0.5, 0.5, 0.0])
+    q = np.array([0.0, 0.5, 0.5])
+    assert d_histogram(p, q) == pytest.approx(-np.log(0.5))  # BC = sqrt(.25) = 0.5
+    assert d_histogram(p, 3 * p) == 0.0  # normalised inside
+    assert d_histogram(p, np.array([0.0, 0.0, 1.0])) == pytest.approx(-np.log(1e-6))
+
+
+def test_histogram_pools_achromatic_pixels_by_brightness():
+    params = PerceptionParams()
+    n_chromatic = params.hue_bins * params.sat_bins
+    white = hsv_histogram(np.array([[240, 240, 240], [250, 245, 250]], np.uint8), params)
+    grey = hsv_histogram(np.array([[120, 120, 120], [125, 128, 126]], np.uint8), params)
+    orange = hsv_histogram(np.array([[255, 128, 12]], np.uint8), params)
+    assert white[:n_chromatic].sum() == 0.0 and grey[:n_chromatic].sum() == 0.0
+    assert orange[n_chromatic:].sum() == 0.0
+    assert d_histogram(white, grey) > 0.5
+
+
+def test_d_scalar():
+    assert d_scalar(0.2, 0.5, 0.3) == pytest.approx(1.0)
+    assert d_scalar(0.5, 0.2, 0.3) == d_scalar(0.2, 0.5, 0.3)
+    with pytest.raises(ValueError):
+        d_scalar(1.0, 2.0, 0.0)
+
+
+# --- saliency (eq. 21-22) ------------------------------------------------------------------
+
+
+def _at(x: float, y: float, z: float = 0.8) -> Cluster:
+    return Cluster(
+        centroid=np.array([x, y, z]),
+        yaw=0.0,
+        yaw_period=0.0,
+        extents=np.array([0.05, 0.05, 0.05]),
+        histogram=np.ones(3) / 3,
+        n_points=50,
+    )
+
+
+def test_salient_cluster_is_the_nearest_within_epsilon():
+    cs = (_at(0.4, 0.0), _at(0.6, 0.1), _at(0.6, -0.2))
+    assert salient_cluster(cs, np.array([0.59, 0.12, 0.80])) == 1
+    # Horizontal distance: a POI 12 cm above the object (placing something on top) still
+    # selects it.
+    assert salient_cluster(cs, np.array([0.41, 0.0, 0.92])) == 0
+    assert salient_cluster(cs, np.array([0.5, 0.0, 0.8])) is None  # 10 cm from everything
+    assert salient_cluster(cs, np.array([0.5, 0.0, 0.8]), epsilon=0.15) == 0
+    assert salient_cluster((), np.zeros(3)) is None
+    assert salient_cluster(cs, np.array([0.6, -0.2 + 0.9 * DEFAULT_EPSILON, 0.8, 1.0])) == 2
+
+
+def test_salient_cluster_on_a_rendered_grasp(scene):
+    scene.clear()
+    truth = {
+        n: scene.place(n, *p)
+        for n, p in {"orange_cube": (0.45, -0.1, 0.2), "green_cylinder": (0.62, 0.15, 0.0)}.items()
+    }
+    found = clusters_from_frame(scene.render(), None)
+    k = salient_cluster(found, truth["green_cylinder"] + [0.01, -0.01, 0.09])  # place on top
+    assert k is not None
+    assert np.linalg.norm(found[k].centroid - truth["green_cylinder"]) < 0.01
