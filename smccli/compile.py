@@ -1,0 +1,237 @@
+"""``smc compile``: demonstration logs -> SMC chains -> the tree (paper 3.1-3.8, Algorithm 1).
+
+Per log, in order: read -> temporal saliency (fragments) -> perception saliency ->
+action saliency -> SMCs; then Algorithm 1 inserts the chain into the tree. Compile only
+perceives through the logged sensors (camera, scale, the robot's own joints for the
+self-filter); ``/sim/ground_truth`` is never read.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from filelock import FileLock, Timeout
+
+from smccli import __version__
+from smccli import dmp as dmp_mod
+from smccli.errors import LogError, TreeError
+from smccli.logs import Log, read_log
+from smccli.params import SmcParams, params_to_dict, with_overrides
+from smccli.perception import clusters_from_frame, salient_cluster
+from smccli.robot_model import RobotModel
+from smccli.segmentation import Fragment, SegmentMode, segment, trace_from_commands
+from smccli.sensors import CameraFrame
+from smccli.smc import Action, SalientPerceptions, Smc, Source, goal_in_object
+from smccli.tree import Tree, insert_chain, load_tree, save_tree
+
+#: Topics every arm log must hold for compile.
+REQUIRED_TOPICS = {"/teleop/command", "/robot/poi", "/robot/joint_states", "/camera/color",
+                   "/camera/depth", "/camera/calibration"}
+#: Topics compile reads; the ground truth is deliberately not among them.
+READ_TOPICS = REQUIRED_TOPICS | {"/tf", "/scale/weight", "/saliency"}
+
+
+@dataclass(frozen=True, slots=True)
+class Chain:
+    """The SMCs extracted from one log, in time order."""
+
+    log: Path
+    """The log file."""
+    sha256: str
+    """Its sha256 (hex)."""
+    fragments: tuple[Fragment, ...]
+    """Temporal saliency: the fragments."""
+    smcs: tuple[Smc, ...]
+    """One SMC per fragment."""
+    warnings: tuple[str, ...]
+    """One-line warnings (truncated log, no boundary, no salient object...)."""
+
+
+@dataclass(frozen=True, slots=True)
+class CompileResult:
+    """What a compile did."""
+
+    tree: Tree
+    """The tree after the compile (written to disk unless unchanged)."""
+    added: tuple[Chain, ...]
+    """Logs inserted by this compile."""
+    skipped: tuple[Path, ...]
+    """Logs already in the tree."""
+    changed: bool
+    """Whether the file was rewritten (version grew)."""
+
+
+def _frame_at(frames: Sequence[CameraFrame], t: float) -> CameraFrame | None:
+    """First camera frame at or after ``t`` (within 0.2 s), else the last one before."""
+    after = [f for f in frames if f.t >= t - 1e-6]
+    if after and after[0].t - t <= 0.2:
+        return after[0]
+    before = [f for f in frames if f.t < t]
+    return before[-1] if before else (after[0] if after else None)
+
+
+def _finger_speed(log: Log) -> tuple[np.ndarray, np.ndarray]:
+    """Largest finger joint speed over time, for settling the gripper edges."""
+    t = np.array([js.t for js in log.joint_states], dtype=float)
+    if not log.joint_states:
+        return t, np.zeros(0)
+    names = log.joint_states[0].names
+    idx = [i for i, n in enumerate(names) if "finger" in n]
+    if not idx:
+        return t, np.zeros(len(t))
+    vel = np.array([np.abs(js.velocity[idx]).max() for js in log.joint_states])
+    return t, vel
+
+
+def extract_chain(log: Log, params: SmcParams, mode: SegmentMode) -> Chain:
+    """Temporal, perception and action saliency of one log -> its SMC chain (eq. 40-42)."""
+    warnings: list[str] = []
+    name = log.path.name
+    t_end = float(log.poi_t[-1]) if len(log.poi_t) else 0.0
+    t_f, v_f = _finger_speed(log)
+    marks = tuple(m.t for m in log.marks if m.source == "operator")
+    trace = trace_from_commands(log.commands, t_f, v_f, log.weight_t, log.weight, marks, t_end)
+    if mode is SegmentMode.markers and not marks:
+        warnings.append(f"{name}: no saliency marks; the whole log is one fragment "
+                        "(try --segment auto)")
+    fragments = segment(trace, mode, snap_window=params.snap_window,
+                        min_fragment=params.min_fragment, auto_gap=params.auto_gap)
+    robot = RobotModel.from_log(log)
+    has_scale = len(log.weight) > 0
+    smcs: list[Smc] = []
+    for k, frag in enumerate(fragments):
+        frame = _frame_at(log.frames, frag.t0)
+        if frame is None:
+            raise LogError(f"{name}: no camera frame near t={frag.t0:.2f} s")
+        clusters = clusters_from_frame(frame, robot.geometry_at(log, frame.t), params.perception)
+        poi_end = log.poi[int(np.argmin(np.abs(log.poi_t - frag.t1)))]
+        idx = salient_cluster(clusters, poi_end[:3], params.epsilon)
+        cluster = None if idx is None else clusters[idx]
+        weight = None
+        if has_scale:
+            sel = (log.weight_t >= frag.t0 - 1e-6) & (log.weight_t <= frag.t0 + 0.15)
+            w = log.weight[sel] if sel.any() else log.weight[[int(np.argmin(
+                np.abs(log.weight_t - frag.t0)))]]
+            weight = float(np.median(w))
+        action = _action(log, frag, cluster, params)
+        if cluster is None and action.event != "none":
+            warnings.append(f"{name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends "
+                            f"with no object within {params.epsilon} m of the POI; its goal "
+                            "is stored in the world frame")
+        smcs.append(Smc(perception=SalientPerceptions(cluster=cluster, weight=weight),
+                        action=action))
+    return Chain(log=log.path, sha256=log.sha256, fragments=tuple(fragments),
+                 smcs=tuple(smcs), warnings=tuple(warnings))
+
+
+def _action(log: Log, frag: Fragment, cluster, params: SmcParams) -> Action:
+    """Action saliency (3.4): the commanded POI path over the fragment as a DMP."""
+    cmds = [c for c in log.commands if frag.t0 - 1e-6 <= c.t <= frag.t1 + 1e-6]
+    if len(cmds) < 3:
+        raise LogError(f"{log.path.name}: fragment {frag.t0:.2f}-{frag.t1:.2f} s holds fewer "
+                       "than 3 operator commands")
+    t = np.array([c.t for c in cmds]) - cmds[0].t
+    path = np.array([c.target for c in cmds], dtype=float)
+    path[:, 3] = np.unwrap(path[:, 3])
+    dmp = dmp_mod.fit(t, path, params.dmp)
+    goal_world = path[-1].copy()
+    goal_world[3] = math.remainder(goal_world[3], 2 * math.pi)
+    if cluster is not None:
+        goal, frame = goal_in_object(goal_world, cluster), "object"
+    else:
+        goal, frame = goal_world, "world"
+    return Action(dmp=dmp, goal_frame=frame, goal=goal, gripper_start=float(cmds[0].gripper),
+                  gripper_end=float(cmds[-1].gripper))
+
+
+def _required_topics(log: Log) -> set[str]:
+    needed = set(REQUIRED_TOPICS)
+    if log.metadata.get("has_scale") == "true":
+        needed.add("/scale/weight")
+    return needed
+
+
+def compile_logs(
+    logs: Sequence[Path],
+    out: Path,
+    *,
+    segment_mode: SegmentMode = SegmentMode.markers,
+    rebuild: bool = False,
+    overrides: Sequence[str] = (),
+    on_progress: Callable[[Path, str], None] | None = None,
+    on_warning: Callable[[str], None] | None = None,
+) -> CompileResult:
+    """Add the logs to the tree at ``out`` (created if absent) and write it atomically.
+
+    A log already in the tree is skipped. Parameters that differ from the tree's are
+    refused unless ``rebuild``. Any bad log aborts the compile before the file is touched.
+    """
+    out = Path(out)
+    warn = on_warning or (lambda msg: None)
+    lock = FileLock(str(out) + ".lock")
+    try:
+        lock.acquire(timeout=60)
+    except Timeout:
+        raise TreeError(f"{out}: locked by another compile ({out}.lock)") from None
+    try:
+        if out.exists() and not rebuild:
+            tree = load_tree(out)
+            wanted = with_overrides(tree.params, list(overrides))
+            if params_to_dict(wanted) != params_to_dict(tree.params):
+                raise TreeError(f"{out}: --set {' '.join(overrides)} differs from the tree's "
+                                "parameters; use --rebuild to start afresh")
+        else:
+            old_version = load_tree(out).version if (out.exists() and rebuild) else 0
+            tree = Tree(params=with_overrides(SmcParams(), list(overrides)),
+                        version=old_version)
+        known = tree.log_digests()
+        added: list[Chain] = []
+        skipped: list[Path] = []
+        for path in logs:
+            path = Path(path)
+            if on_progress:
+                on_progress(path, "reading")
+            log = read_log(path, topics=READ_TOPICS, on_warning=warn)
+            missing = sorted(_required_topics(log) - {t for t, n in log.topic_counts.items()
+                                                      if n > 0})
+            if missing:
+                raise LogError(f"{path}: topic {missing[0]} missing (scene "
+                               f"{log.metadata.get('scene', '?')} needs it)")
+            if log.sha256 in known or any(c.sha256 == log.sha256 for c in added):
+                skipped.append(path)
+                continue
+            if tree.scene and log.metadata.get("scene") not in (None, tree.scene.get("name")):
+                raise LogError(f"{path}: scene {log.metadata.get('scene')!r} differs from the "
+                               f"tree's scene {tree.scene.get('name')!r}")
+            if on_progress:
+                on_progress(path, "extracting")
+            chain = extract_chain(log, tree.params, segment_mode)
+            for w in chain.warnings:
+                warn(w)
+            sources = [Source(log=path.name, sha256=log.sha256, t0=f.t0, t1=f.t1)
+                       for f in chain.fragments]
+            tree = insert_chain(tree, chain.smcs, sources)
+            if not tree.scene:
+                tree = replace(tree, scene={"name": log.metadata.get("scene", ""),
+                                            "digest": log.metadata.get("scene_digest", ""),
+                                            "log": log.sha256})
+            added.append(chain)
+        if not added:
+            return CompileResult(tree=tree, added=(), skipped=tuple(skipped), changed=False)
+        entry = {
+            "version": tree.version + 1,
+            "time": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+            "smc_version": __version__,
+            "logs": [{"name": c.log.name, "sha256": c.sha256, "fragments": len(c.smcs)}
+                     for c in added],
+        }
+        tree = replace(tree, version=tree.version + 1, history=(*tree.history, entry))
+        save_tree(tree, out)
+        return CompileResult(tree=tree, added=tuple(added), skipped=tuple(skipped), changed=True)
+    finally:
+        lock.release()
