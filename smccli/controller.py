@@ -126,7 +126,8 @@ class CartesianController:
         # Exact projector (not the damped one), so the posture pull leaves no task error.
         N = np.eye(7) - np.linalg.pinv(J, rcond=1e-4) @ J
         posture = HOME - q
-        posture[0] = 0.0  # the base yaw follows the target; do not pull it
+        # The base yaw's comfortable value points the arm at the target.
+        posture[0] = wrap(math.atan2(target[1], target[0]) - q[0])
         dq += N @ (self.nullspace_gain * posture)
         if max_step is not None:
             biggest = np.max(np.abs(dq))
@@ -134,13 +135,36 @@ class CartesianController:
                 dq *= max_step / biggest
         return np.clip(q + dq, self.lo, self.hi)
 
+    def yaw_subgoal(self, q: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """``target`` with its yaw replaced by a waypoint at most 0.5 rad from the current yaw.
+
+        The orientation error alone always turns the short way, which can drive the wrist
+        roll into its limit. Pointing down, yaw ≈ q1 − q7; with q1 settling at the target's
+        bearing, pick the q7 branch inside the limits closest to the current q7 and turn
+        the way that leads there.
+        """
+        self._set(q)
+        R = self.data.site_xmat[self.site_id].reshape(3, 3)
+        yaw = math.atan2(R[1, 0], R[0, 0])
+        d = wrap(target[3] - yaw)
+        q1 = math.atan2(target[1], target[0])
+        base = wrap(q1 - target[3])
+        branches = [base + k * 2 * math.pi for k in (-1, 0, 1)]
+        inside = [b for b in branches if self.lo[6] + 0.05 < b < self.hi[6] - 0.05]
+        q7 = min(inside or branches, key=lambda b: abs(b - q[6]))
+        planned = (q1 - q7) - (q[0] - q[6])  # unwrapped yaw change on that branch
+        d += 2 * math.pi * round((planned - d) / (2 * math.pi))
+        sub = np.array(target, dtype=float)
+        sub[3] = yaw + float(np.clip(d, -0.5, 0.5))
+        return sub
+
     def update(self, target: np.ndarray) -> np.ndarray:
         """Joint targets for this control tick, shape (7,) [rad]; joint speed is capped."""
         target = np.asarray(target, dtype=float)
         q = self.q
         budget = self.max_step
         for _ in range(self.iterations):
-            q_new = self.ik_step(q, target, budget)
+            q_new = self.ik_step(q, self.yaw_subgoal(q, target), budget)
             budget -= float(np.max(np.abs(q_new - q)))
             q = q_new
             if budget <= 1e-9:
@@ -166,7 +190,7 @@ class CartesianController:
             e = self.error(q, target)
             if np.linalg.norm(e[:3]) < tol_pos and np.linalg.norm(e[3:]) < tol_rot:
                 return q, True
-            q = self.ik_step(q, target, 0.2)
+            q = self.ik_step(q, self.yaw_subgoal(q, target), 0.2)
         e = self.error(q, target)
         return q, bool(np.linalg.norm(e[:3]) < tol_pos and np.linalg.norm(e[3:]) < tol_rot)
 
