@@ -179,18 +179,20 @@ class Sim:
         """
         m, d = self.model, self.data
         centers, radii = [], []
+        capsule, cylinder = int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_CYLINDER)
         for g in self._robot_geoms:
             pos, R, size = d.geom_xpos[g], d.geom_xmat[g].reshape(3, 3), m.geom_size[g]
-            gtype = m.geom_type[g]
-            if gtype in (mujoco.mjtGeom.mjGEOM_CAPSULE, mujoco.mjtGeom.mjGEOM_CYLINDER):
-                r, half = size[0], size[1]
+            gtype = int(m.geom_type[g])
+            if gtype in (capsule, cylinder):
+                r, half = float(size[0]), float(size[1])
                 n = max(1, math.ceil(half / r))
-                rad = math.hypot(r, half / n) if gtype == mujoco.mjtGeom.mjGEOM_CYLINDER else r
-                for k in range(n + 1 if gtype == mujoco.mjtGeom.mjGEOM_CAPSULE else n):
-                    if gtype == mujoco.mjtGeom.mjGEOM_CAPSULE:
-                        s = -half + 2 * half * k / n
-                    else:
-                        s = -half + half / n * (2 * k + 1)
+                if gtype == capsule:  # spheres of the capsule's radius along its segment
+                    offsets = np.linspace(-half, half, n + 1)
+                    rad = r
+                else:  # n slices, each inside a sphere through its rim
+                    offsets = -half + half / n * (2 * np.arange(n) + 1)
+                    rad = math.hypot(r, half / n)
+                for s in offsets:
                     centers.append(pos + R[:, 2] * s)
                     radii.append(rad)
             else:

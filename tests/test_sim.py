@@ -1,0 +1,145 @@
+"""Sim: stepping, sensors (camera depth, scale), robot geometry, ground truth, success."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from smccli.scene import load_scene, nominal_layout
+from smccli.sensors import PoiCommand
+from smccli.sim import Sim
+
+
+@pytest.fixture(scope="module")
+def pick_sim() -> Sim:
+    return Sim(load_scene("pick_place"))
+
+
+def test_step_advances_one_control_period(pick_sim: Sim) -> None:
+    sim = Sim(load_scene("pick_place"))
+    poi = sim.poi()
+    assert poi.shape == (4,) and sim.gripper_opening() == pytest.approx(1.0)
+    sim.step(PoiCommand(sim.t, poi, 1.0))
+    assert sim.t == pytest.approx(0.01)
+    js = sim.joint_state()
+    assert js.names[:7] == tuple(f"joint{i}" for i in range(1, 8))
+    assert js.position.shape == js.velocity.shape == js.effort.shape == (9,)
+    assert sim.weight() is None  # no scale in this scene
+
+
+def test_gripper_closes_and_opens() -> None:
+    sim = Sim(load_scene("pick_place"))
+    target = sim.poi()
+    for _ in range(100):
+        sim.step(PoiCommand(sim.t, target, 0.0))
+    assert sim.gripper_opening() < 0.02
+    for _ in range(100):
+        sim.step(PoiCommand(sim.t, target, 0.5))
+    assert sim.gripper_opening() == pytest.approx(0.5, abs=0.02)
+
+
+@pytest.mark.parametrize("name, mass", [("light_box", 0.1), ("heavy_box", 0.5)])
+def test_scale_reads_known_mass_within_2_g(name: str, mass: float) -> None:
+    scene = load_scene("weigh_sort")
+    layout = nominal_layout(scene)
+    sx, sy, sz, _ = layout["scale"]
+    top = sz + scene.object("scale").size[2] / 2
+    layout[name] = (sx, sy, top + 0.026, 0.3)
+    sim = Sim(scene, layout)
+    assert sim.weight() == pytest.approx(0.0, abs=1e-6)  # tared
+    sim.settle(1.0)
+    assert sim.weight() == pytest.approx(mass, abs=0.002)
+
+
+def test_depth_of_an_object_is_where_it_is(pick_sim: Sim) -> None:
+    frame = pick_sim.render_camera()
+    h, w = pick_sim.scene.camera.height, pick_sim.scene.camera.width
+    assert frame.rgb.shape == (h, w, 3) and frame.rgb.dtype == np.uint8
+    assert frame.depth.shape == (h, w) and frame.depth.dtype == np.float32
+    T_camera_world = np.linalg.inv(frame.T_world_camera)
+    for name, (r, g, b) in [("orange_cube", (255, 115, 13)), ("green_cylinder", (26, 178, 51))]:
+        pose = pick_sim.ground_truth()[name]
+        top = pose[:3] + [0, 0, pick_sim.scene.object(name).size[2] / 2]
+        p = T_camera_world @ np.append(top, 1.0)
+        u, v, _ = frame.K @ (p[:3] / p[2])
+        ui, vi = round(u), round(v)
+        # The top face is seen from above: its centre pixel's depth is that point's z.
+        assert frame.depth[vi, ui] == pytest.approx(p[2], abs=0.004), name
+        px = frame.rgb[vi, ui].astype(int)
+        assert np.argmax(px) == np.argmax([r, g, b]), (name, px)
+    # Back-project the depth image: the table is at z = 0 in the world.
+    vs, us = np.mgrid[200:220, 150:170]
+    z = frame.depth[vs, us]
+    rays = np.linalg.inv(frame.K) @ np.stack([us.ravel(), vs.ravel(), np.ones(us.size)])
+    pts = frame.T_world_camera[:3, :3] @ (rays * z.ravel()) + frame.T_world_camera[:3, 3:4]
+    np.testing.assert_allclose(pts[2], 0.0, atol=0.003)
+
+
+def test_every_layout_position_is_in_view() -> None:
+    for name in ("pick_place", "weigh_sort", "bench_pick"):
+        sim = Sim(load_scene(name))
+        cam = sim.scene.camera
+        T_camera_world = np.linalg.inv(sim.camera_pose())
+        for o in sim.scene.objects:
+            r = o.footprint_radius
+            for x in (o.range_x[0] - r, o.range_x[1] + r):
+                for y in (o.range_y[0] - r, o.range_y[1] + r):
+                    p = T_camera_world @ [x, y, 0.0, 1.0]
+                    u, v, _ = sim.camera_matrix() @ (p[:3] / p[2])
+                    assert 0 <= u < cam.width and 0 <= v < cam.height, (name, o.name, x, y)
+
+
+def test_robot_geometry_covers_the_hand(pick_sim: Sim) -> None:
+    geom = pick_sim.robot_geometry()
+    assert geom.centers.shape == (len(geom.radii), 3) and len(geom.radii) > 10
+    d = pick_sim.data
+    for name in ("finger_left_geom", "finger_right_geom", "link4_geom"):
+        g = pick_sim.model.geom(name).id
+        for corner in (-1, 1):  # both ends of the geom's long axis
+            p = d.geom_xpos[g] + corner * d.geom_xmat[g].reshape(3, 3)[:, 2] * 0.04
+            assert (np.linalg.norm(geom.centers - p, axis=1) <= geom.radii + 1e-9).any(), name
+    # The space between the open fingers (where a grasped object is) stays free.
+    assert not (np.linalg.norm(geom.centers - pick_sim.poi()[:3], axis=1) < geom.radii).any()
+    base = np.linalg.norm(geom.centers - [0, 0, 0.06], axis=1) < geom.radii
+    assert base.any()
+
+
+def test_ground_truth_and_success(pick_sim: Sim) -> None:
+    gt = pick_sim.ground_truth()
+    assert set(gt) == {o.name for o in pick_sim.scene.objects}
+    for pose in gt.values():
+        assert pose.shape == (7,) and np.linalg.norm(pose[3:]) == pytest.approx(1.0)
+    result = pick_sim.success()
+    assert not result and "not resting on" in result.reason
+
+
+def test_success_when_placed_by_hand() -> None:
+    scene = load_scene("pick_place")
+    layout = nominal_layout(scene)
+    gx, gy, gz, _ = layout["green_cylinder"]
+    layout["orange_cube"] = (gx + 0.01, gy, gz + 0.04 + 0.026, 0.0)
+    sim = Sim(scene, layout)
+    sim.settle(1.0)
+    assert sim.success() and sim.success("cube_on_green")
+    assert not sim.success("pyramid_on_yellow")
+
+
+def test_speed(capsys) -> None:
+    sim = Sim(load_scene("bench_pick"))
+    target = sim.poi() + [0.1, 0.1, -0.1, 1.0]
+    t0 = time.perf_counter()
+    for _ in range(200):
+        sim.step(PoiCommand(sim.t, target, 1.0))
+    step_ms = (time.perf_counter() - t0) / 200 * 1e3
+    sim.render_camera()
+    t0 = time.perf_counter()
+    for _ in range(10):
+        sim.render_camera()
+    render_ms = (time.perf_counter() - t0) / 10 * 1e3
+    with capsys.disabled():
+        print(f"\n  sim: {step_ms:.2f} ms per 10 ms step, {render_ms:.1f} ms per RGB-D render")
+    assert step_ms < 10 and render_ms < 100
+    assert math.isfinite(step_ms)
