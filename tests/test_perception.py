@@ -6,6 +6,7 @@ The scene is tests/perception_scene.py; ground truth is read only in assertions.
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -31,6 +32,8 @@ from smccli.perception import (  # noqa: E402
     Cluster,
     PerceptionParams,
     cloud_from_frame,
+    cluster_from_dict,
+    cluster_to_dict,
     clusters_from_frame,
     d_cluster,
     d_histogram,
@@ -137,6 +140,16 @@ def test_clusters_are_sorted_and_deterministic(scene, rng):
         np.testing.assert_array_equal(ca.centroid, cb.centroid)
         np.testing.assert_array_equal(ca.histogram, cb.histogram)
         assert ca.yaw == cb.yaw and ca.n_points == cb.n_points
+
+
+def test_cluster_dict_round_trip(scene):
+    scene.clear()
+    scene.place("white_box", 0.5, 0.1, 0.4)
+    (c,) = clusters_from_frame(scene.render(), None)
+    back = cluster_from_dict(json.loads(json.dumps(cluster_to_dict(c))))
+    assert d_cluster(c, back) == 0.0
+    np.testing.assert_array_equal(back.centroid, c.centroid)
+    assert (back.yaw, back.yaw_period, back.n_points) == (c.yaw, c.yaw_period, c.n_points)
 
 
 def test_self_filter_removes_the_arm_hanging_into_view(scene):

@@ -8,7 +8,12 @@ an upright oriented box (centroid, yaw, extents). :func:`d_cluster` compares two
 """
 
 from smccli.perception.cloud import cloud_from_frame
-from smccli.perception.clusters import Cluster, clusters_from_frame
+from smccli.perception.clusters import (
+    Cluster,
+    cluster_from_dict,
+    cluster_to_dict,
+    clusters_from_frame,
+)
 from smccli.perception.distance import d_cluster, d_extents, d_scalar
 from smccli.perception.histogram import d_histogram, hsv_histogram
 from smccli.perception.params import PerceptionParams
@@ -19,6 +24,8 @@ __all__ = [
     "Cluster",
     "PerceptionParams",
     "cloud_from_frame",
+    "cluster_from_dict",
+    "cluster_to_dict",
     "clusters_from_frame",
     "d_cluster",
     "d_extents",

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import open3d as o3d
 
-from smccli.perception.cloud import object_points
+from smccli.perception.cloud import object_points, plane_distance
 from smccli.perception.histogram import hsv_histogram
 from smccli.perception.params import PerceptionParams
 from smccli.sensors import CameraFrame, RobotGeometry
@@ -54,7 +54,7 @@ def describe_cluster(
     """Location, extents, symmetry and histogram of one cluster's points (n, 3) [m]."""
     # Height above the table: signed distance to the table plane.
     if plane is not None:
-        heights = points @ plane[:3] + plane[3]
+        heights = plane_distance(points, plane)
     else:
         heights = points[:, 2] - points[:, 2].min()
     height = float(heights.max())
@@ -134,3 +134,27 @@ def clusters_from_frame(
         found.append(describe_cluster(points[idx], colors[idx], plane, params))
     found.sort(key=lambda c: (float(c.centroid[0]), float(c.centroid[1])))
     return tuple(found)
+
+
+def cluster_to_dict(c: Cluster) -> dict:
+    """JSON-ready form of a cluster (lists of floats), for tree files and logs."""
+    return {
+        "centroid": [float(v) for v in c.centroid],
+        "yaw": float(c.yaw),
+        "yaw_period": float(c.yaw_period),
+        "extents": [float(v) for v in c.extents],
+        "histogram": [float(v) for v in c.histogram],
+        "n_points": int(c.n_points),
+    }
+
+
+def cluster_from_dict(d: dict) -> Cluster:
+    """Inverse of :func:`cluster_to_dict`."""
+    return Cluster(
+        centroid=np.asarray(d["centroid"], dtype=np.float64),
+        yaw=float(d["yaw"]),
+        yaw_period=float(d["yaw_period"]),
+        extents=np.asarray(d["extents"], dtype=np.float64),
+        histogram=np.asarray(d["histogram"], dtype=np.float64),
+        n_points=int(d["n_points"]),
+    )
