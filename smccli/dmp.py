@@ -234,13 +234,29 @@ def rollout(dmp: Dmp, *, start: np.ndarray | None = None, goal: np.ndarray | Non
     return s * duration, y
 
 
-def shape_distance(a: Dmp, b: Dmp, n_samples: int = 100) -> float:
-    """Shape part of D_A (eq. 29) [m]: RMS gap of the canonical-frame rollouts.
+def _by_arc_length(c: np.ndarray, n: int) -> np.ndarray:
+    """Resample a path (N, d) at ``n`` points evenly spaced along its length.
 
-    Each DMP is rolled out at its own start and goal on ``n_samples`` points of normalised
-    time, expressed in its canonical frame, and the RMS distance is rescaled to metres by
-    the mean start-to-goal distance. Angles are left out (they are compared by the goal
-    term of D_A) unless the POI has no positions, in which case the result is in [rad].
+    Comparing paths by arc length rather than time makes the shape distance blind to how
+    the operator timed the move: pauses, hesitations and uneven speed (a still path keeps
+    its time sampling).
+    """
+    seg = np.linalg.norm(np.diff(c, axis=0), axis=1)
+    arc = np.r_[0.0, np.cumsum(seg)]
+    if arc[-1] < 1e-9:
+        return c[np.linspace(0, len(c) - 1, n).round().astype(int)]
+    u = np.linspace(0.0, arc[-1], n)
+    return np.stack([np.interp(u, arc, c[:, k]) for k in range(c.shape[1])], axis=1)
+
+
+def shape_distance(a: Dmp, b: Dmp, n_samples: int = 100) -> float:
+    """Shape part of D_A (eq. 29) [m]: RMS gap of the canonical-frame paths.
+
+    Each DMP is rolled out at its own start and goal, expressed in its canonical frame,
+    resampled at ``n_samples`` points evenly spaced along its length (so speed, pauses and
+    hesitation do not count), and the RMS distance is rescaled to metres by the mean
+    start-to-goal distance. Angles are left out (they are compared by the goal term of
+    D_A) unless the POI has no positions, in which case the result is in [rad].
     """
     if a.n_dims != b.n_dims or a.n_pos != b.n_pos:
         raise ValueError(f"shape_distance: POI layouts differ ({a.n_dims}, {a.n_pos}) vs "
@@ -249,8 +265,8 @@ def shape_distance(a: Dmp, b: Dmp, n_samples: int = 100) -> float:
     cs, scales = [], []
     for d in (a, b):
         fr = _frame(d.start, d.goal, d.n_pos, d.params)
-        _, y = rollout(d, n_steps=n_samples)
-        cs.append(_to_canonical(y, d.start, fr, d.n_pos)[:, dims])
+        _, y = rollout(d, n_steps=8 * n_samples)
+        cs.append(_by_arc_length(_to_canonical(y, d.start, fr, d.n_pos)[:, dims], n_samples))
         scales.append(fr.scale if a.n_pos else 1.0)
     rms = np.sqrt(np.mean(np.sum((cs[0] - cs[1]) ** 2, axis=1)))
     return float(rms * np.mean(scales))

@@ -45,6 +45,9 @@ class RecordConfig:
     """Start from a random layout of the scene instead of the nominal one."""
     ground_truth_rate: float = 10.0
     """Rate of ``/sim/ground_truth`` [Hz] (evaluation only)."""
+    reproducible: bool = False
+    """Cut chunks on simulation time only, so the same script and seed give a byte-identical
+    file (sample logs); otherwise also every wall-clock second, for crash safety."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,7 +134,8 @@ def record(cfg: RecordConfig, on_status: Callable[[RecordStatus], None] | None =
     tick = 0
     try:
         with LogWriter(out, metadata=_metadata(scene, cfg, extra),
-                       attachments=scene_attachments(scene), force=cfg.force) as writer:
+                       attachments=scene_attachments(scene), force=cfg.force,
+                       wall_clock_flush=not cfg.reproducible) as writer:
             _log_state(writer, sim)
             while True:
                 t = sim.t

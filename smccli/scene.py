@@ -131,6 +131,24 @@ class Scene:
     """One criterion per task."""
     description: str = ""
     """One line for ``smc scenes``."""
+    variants: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    """Named subsets of the optional objects, ``(name, object names)``. A layout holds the
+    objects of one variant plus every object no variant names (tables, bins, scales);
+    the others are parked out of sight. Empty: every object is always present."""
+
+    def variant_objects(self, variant: str | None) -> tuple[str, ...]:
+        """Objects present in ``variant`` (all objects when None or without variants)."""
+        if variant is None or not self.variants:
+            return tuple(o.name for o in self.objects)
+        table = dict(self.variants)
+        if variant not in table:
+            raise SceneError(
+                f"scene {self.name}: no variant {variant!r} (variants: {', '.join(table)})"
+            )
+        optional = {n for _, names in self.variants for n in names}
+        return tuple(
+            o.name for o in self.objects if o.name not in optional or o.name in table[variant]
+        )
 
     def object(self, name: str) -> ObjectSpec:
         """The object called ``name``; SceneError listing the valid names otherwise."""
@@ -203,23 +221,34 @@ def load_scene_from_text(yaml_text: str, mjcf_text: str) -> Scene:
         poi=poi,
         success=success,
         description=str(raw.get("description", "")),
+        variants=_variants(raw, objects, where),
     )
 
 
-def nominal_layout(scene: Scene) -> Layout:
-    """Every object at its nominal pose."""
-    return {o.name: tuple(o.pose) for o in scene.objects}  # type: ignore[misc]
+def nominal_layout(scene: Scene, variant: str | None = None) -> Layout:
+    """The objects of ``variant`` (default: all) at their nominal poses."""
+    present = scene.variant_objects(variant)
+    return {o.name: tuple(o.pose) for o in scene.objects if o.name in present}  # type: ignore[misc]
 
 
-def sample_layout(scene: Scene, rng: np.random.Generator, *, max_tries: int = 1000) -> Layout:
+def sample_layout(
+    scene: Scene, rng: np.random.Generator, *, variant: str | None = None, max_tries: int = 1000
+) -> Layout:
     """Draw each object's x, y, yaw uniformly from its ranges; redraw while footprints overlap.
 
-    Footprints are the circles circumscribing the objects (conservative), with 1 cm between.
+    A scene with variants draws one uniformly unless ``variant`` is given. Footprints are
+    the circles circumscribing the objects (conservative), with 1 cm between.
     """
     gap = 0.01
+    if variant is None and scene.variants:
+        names = [v for v, _ in scene.variants]
+        variant = names[int(rng.integers(len(names)))]
+    present = scene.variant_objects(variant)
     for _ in range(max_tries):
         layout: Layout = {}
         for o in scene.objects:
+            if o.name not in present:
+                continue
             x = float(rng.uniform(*o.range_x)) if o.range_x[0] < o.range_x[1] else o.range_x[0]
             y = float(rng.uniform(*o.range_y)) if o.range_y[0] < o.range_y[1] else o.range_y[0]
             lo, hi = o.range_yaw
@@ -233,7 +262,7 @@ def sample_layout(scene: Scene, rng: np.random.Generator, *, max_tries: int = 10
 
 
 def _overlaps(scene: Scene, layout: Layout, gap: float) -> bool:
-    objs = scene.objects
+    objs = [o for o in scene.objects if o.name in layout]
     for i, a in enumerate(objs):
         for b in objs[i + 1 :]:
             pa, pb = layout[a.name], layout[b.name]
@@ -332,6 +361,24 @@ def _parse(
     return tuple(objects), camera, scale, poi, tuple(success)
 
 
+def _variants(
+    raw: Mapping[str, Any], objects: tuple[ObjectSpec, ...], where: str
+) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    names = {o.name for o in objects}
+    out = []
+    for variant, members in (raw.get("variants") or {}).items():
+        if not isinstance(members, list) or not members:
+            raise SceneError(f"{where}: variants.{variant}: expected a list of object names")
+        for n in members:
+            if n not in names:
+                raise SceneError(
+                    f"{where}: variants.{variant}: no object {n!r} "
+                    f"(objects: {', '.join(sorted(names))})"
+                )
+        out.append((str(variant), tuple(str(n) for n in members)))
+    return tuple(out)
+
+
 def _build(raw: Mapping[str, Any], yaml_text: str, spec: mujoco.MjSpec, where: str) -> Scene:
     objects, camera, scale, poi, success = _parse(raw, where)
     for obj in objects:
@@ -358,6 +405,7 @@ def _build(raw: Mapping[str, Any], yaml_text: str, spec: mujoco.MjSpec, where: s
         poi=poi,
         success=success,
         description=str(raw.get("description", "")),
+        variants=_variants(raw, objects, where),
     )
 
 
@@ -387,8 +435,13 @@ def _add_object(spec: mujoco.MjSpec, obj: ObjectSpec) -> None:
         body.add_freejoint(name=f"{obj.name}_joint")
     sx, sy, sz = (s / 2 for s in obj.size)
     box, cyl = mujoco.mjtGeom.mjGEOM_BOX, mujoco.mjtGeom.mjGEOM_CYLINDER
-    common = dict(rgba=list(obj.rgba), condim=4, friction=[1.2, 0.02, 0.002],
-                  solref=[0.004, 1], solimp=[0.95, 0.99, 0.001, 0.5, 2])
+    common = dict(
+        rgba=list(obj.rgba),
+        condim=4,
+        friction=[1.2, 0.02, 0.002],
+        solref=[0.004, 1],
+        solimp=[0.95, 0.99, 0.001, 0.5, 2],
+    )
     parts: list[tuple[Any, list[float], list[float]]] = []  # (type, half size, pos)
     if obj.shape == "box":
         parts = [(box, [sx, sy, sz], [0, 0, 0])]
@@ -412,17 +465,33 @@ def _add_object(spec: mujoco.MjSpec, obj: ObjectSpec) -> None:
     elif obj.shape == "scale":
         # A housing (part of the static body) and a platform body on top whose force sensor
         # reads what rests on it; the platform is welded, so the reading is the static load.
-        body.add_geom(type=box, size=[sx, sy, sz * 0.6], pos=[0, 0, -sz * 0.4],
-                      rgba=[0.2, 0.2, 0.22, 1], mass=1.0)
+        body.add_geom(
+            type=box,
+            size=[sx, sy, sz * 0.6],
+            pos=[0, 0, -sz * 0.4],
+            rgba=[0.2, 0.2, 0.22, 1],
+            mass=1.0,
+        )
         plat = body.add_body(name=f"{obj.name}_platform", pos=[0, 0, sz * 0.6])
         plat.add_geom(type=box, size=[sx * 0.95, sy * 0.95, sz * 0.4], mass=obj.mass, **common)
         plat.add_site(name=f"{obj.name}_site", pos=[0, 0, 0])
-        spec.add_sensor(name=f"{obj.name}_force", type=mujoco.mjtSensor.mjSENS_FORCE,
-                        objtype=mujoco.mjtObj.mjOBJ_SITE, objname=f"{obj.name}_site")
+        spec.add_sensor(
+            name=f"{obj.name}_force",
+            type=mujoco.mjtSensor.mjSENS_FORCE,
+            objtype=mujoco.mjtObj.mjOBJ_SITE,
+            objname=f"{obj.name}_site",
+        )
         return
-    total = sum(8 * s[0] * s[1] * s[2] if t == box else math.pi * s[0] ** 2 * 2 * s[1]
-                for t, s, _ in parts)
+    total = sum(
+        8 * s[0] * s[1] * s[2] if t == box else math.pi * s[0] ** 2 * 2 * s[1] for t, s, _ in parts
+    )
     for i, (t, half, pos) in enumerate(parts):
         vol = 8 * half[0] * half[1] * half[2] if t == box else math.pi * half[0] ** 2 * 2 * half[1]
-        body.add_geom(name=f"{obj.name}_geom{i}", type=t, size=half, pos=pos,
-                      mass=obj.mass * vol / total, **common)
+        body.add_geom(
+            name=f"{obj.name}_geom{i}",
+            type=t,
+            size=half,
+            pos=pos,
+            mass=obj.mass * vol / total,
+            **common,
+        )

@@ -31,6 +31,10 @@ CONTROL_PERIOD = 0.01
 FINGER_TRAVEL = 0.05
 """Travel of each finger [m]; opening 1 = 2 × this between the pads."""
 GRAVITY = 9.81
+PARK_X, PARK_Y0, PARK_DY = 2.5, -2.0, 0.4
+"""Where objects absent from a layout rest: on the floor, behind the camera [m]."""
+FLOOR_Z = -0.75
+"""Height of the floor plane of the built-in scenes [m]."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,7 +90,9 @@ class Sim:
     def _id(self, kind: mujoco.mjtObj, name: str) -> int:
         i = mujoco.mj_name2id(self.model, kind, name)
         if i < 0:
-            raise SceneError(f"scene {self.scene.name}: model has no {kind.name[6:].lower()} {name!r}")
+            raise SceneError(
+                f"scene {self.scene.name}: model has no {kind.name[6:].lower()} {name!r}"
+            )
         return i
 
     # --- state -------------------------------------------------------------------------
@@ -107,6 +113,22 @@ class Sim:
             else:  # static: move the body itself (the scale, fixed bins)
                 m.body_pos[self._body[name]] = [x, y, z]
                 m.body_quat[self._body[name]] = quat
+        # Objects the layout leaves out (another variant) rest on the floor behind the
+        # camera, out of its view and out of the workspace.
+        parked = [o for o in self.scene.objects if o.name not in layout and not o.fixed]
+        for i, o in enumerate(parked):
+            qa, _ = self._free_qadr[o.name]
+            d.qpos[qa : qa + 7] = [
+                PARK_X,
+                PARK_Y0 + PARK_DY * i,
+                FLOOR_Z + o.size[2] / 2,
+                1.0,
+                0.0,
+                0.0,
+                0.0,
+            ]
+        self.present = tuple(n for n in layout)
+        """Names of the objects the layout placed (evaluation only)."""
         d.qpos[self._jq[:7]] = HOME
         d.qpos[self._finger_q] = FINGER_TRAVEL
         self.controller.reset(HOME)
@@ -224,8 +246,12 @@ class Sim:
         far = self.model.vis.map.zfar * self.model.stat.extent
         depth[depth >= 0.999 * far] = 0.0
         return CameraFrame(
-            t=self.t, rgb=rgb, depth=depth, K=self.camera_matrix(),
-            T_world_camera=self.camera_pose(), frame_id="camera",
+            t=self.t,
+            rgb=rgb,
+            depth=depth,
+            K=self.camera_matrix(),
+            T_world_camera=self.camera_pose(),
+            frame_id="camera",
         )
 
     def camera_matrix(self) -> np.ndarray:
@@ -257,9 +283,7 @@ class Sim:
     def ground_truth(self) -> dict[str, np.ndarray]:
         """Object poses ``[x, y, z, qw, qx, qy, qz]`` (evaluation only, never for perception)."""
         d = self.data
-        return {
-            n: np.concatenate([d.xpos[b], d.xquat[b]]) for n, b in self._body.items()
-        }
+        return {n: np.concatenate([d.xpos[b], d.xquat[b]]) for n, b in self._body.items()}
 
     def object_pose(self, name: str) -> np.ndarray:
         """Object ``[x, y, z, yaw]`` (for the simulated operator and evaluation)."""

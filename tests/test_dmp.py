@@ -248,3 +248,13 @@ def test_fit_rejects_time_going_backwards_and_keeps_the_last_of_equal_times():
         fit(t, y)
     with pytest.raises(LogError, match="duration"):
         fit(np.zeros(3), y[:3])
+
+
+def test_shape_distance_ignores_a_hesitation_midway():
+    """A person who pauses half a second midway makes the same action (arc-length compare)."""
+    t, y = lift_and_place(duration=2.0, n=200)
+    half = len(t) // 2
+    pause = np.repeat(y[half : half + 1], 50, axis=0)
+    y_pause = np.vstack([y[:half], pause, y[half:]])
+    t_pause = np.arange(len(y_pause)) * (t[1] - t[0])
+    assert shape_distance(fit(t, y), fit(t_pause, y_pause)) < 0.005
