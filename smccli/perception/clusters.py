@@ -34,7 +34,8 @@ class Cluster:
     """Colour histogram, shape (hue_bins * sat_bins + val_bins,), sums to 1
     (see :mod:`smccli.perception.histogram`)."""
     n_points: int
-    """Number of points in the cluster (before any downsampling: a proxy of image area)."""
+    """Number of points in the cluster (after the optional voxel downsampling); with it off,
+    the object's area in the image [px]."""
 
     @property
     def location(self) -> np.ndarray:
@@ -90,7 +91,7 @@ def describe_cluster(
         yaw = 0.0
     elif yaw_period == np.pi:
         yaw = _wrap_half_pi(float(np.arctan2(long_edge[1], long_edge[0])))
-    else:  # square: report the side direction in (-pi/4, pi/4], the period is pi/2
+    else:  # square: report a side's direction in [-pi/4, pi/4), the period is pi/2
         a = float(np.arctan2(long_edge[1], long_edge[0]))
         yaw = float((a + np.pi / 4) % (np.pi / 2) - np.pi / 4)
     return Cluster(
