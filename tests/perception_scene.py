@@ -26,6 +26,8 @@ from smccli.sensors import CameraFrame, RobotGeometry  # noqa: E402
 
 TABLE_TOP = 0.75
 """Height of the table top [m]."""
+CROP = dict(crop_min=(0.1, -0.7, 0.6), crop_max=(1.2, 0.7, 1.4))
+"""Workspace box of this scene (its table is higher than the built-in scenes')."""
 TABLE_CENTER = (0.55, 0.0)
 TABLE_HALF = (0.35, 0.5)
 CAMERA_POS = np.array([0.0, 0.0, 1.35])
@@ -240,7 +242,7 @@ def separability(n_poses: int = 100, seed: int = 0) -> dict:
     """
     from smccli.perception import PerceptionParams, clusters_from_frame, d_cluster
 
-    params = PerceptionParams()
+    params = PerceptionParams(**CROP)
     rng = np.random.default_rng(seed)
     scene = PerceptionScene()
     clusters: dict[str, list] = {s.name: [] for s in OBJECTS}
@@ -293,7 +295,7 @@ def timing(n_frames: int = 50, seed: int = 0) -> dict:
     """
     from smccli.perception import PerceptionParams, clusters_from_frame
 
-    params = PerceptionParams()
+    params = PerceptionParams(**CROP)
     rng = np.random.default_rng(seed)
     scene = PerceptionScene()
     times, counts = [], []

@@ -17,6 +17,7 @@ from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 from hypothesis.extra.numpy import arrays  # noqa: E402
 from perception_scene import (  # noqa: E402
+    CROP,
     OBJECTS,
     TABLE_CENTER,
     TABLE_HALF,
@@ -42,6 +43,8 @@ from smccli.perception import (  # noqa: E402
     salient_cluster,
 )
 from smccli.sensors import CameraFrame  # noqa: E402
+
+_SCENE_PARAMS = PerceptionParams(**CROP)
 
 T_HP = 0.1
 """The paper's perception threshold."""
@@ -73,7 +76,7 @@ def _yaw_error(a: float, b: float, period: float) -> float:
 def test_empty_table_lifts_onto_the_table_plane_and_has_no_clusters(scene):
     scene.clear()
     frame = scene.render()
-    points, colors = cloud_from_frame(frame)
+    points, colors = cloud_from_frame(frame, None, _SCENE_PARAMS)
     assert points.shape[1] == 3 and colors.shape == points.shape and colors.dtype == np.uint8
     assert len(points) > 0.5 * frame.depth.size  # the table fills most of the view
     # Depth convention, K and T_world_camera together: the table top comes out flat at its
@@ -81,7 +84,7 @@ def test_empty_table_lifts_onto_the_table_plane_and_has_no_clusters(scene):
     top = points[np.abs(points[:, 0] - TABLE_CENTER[0]) < TABLE_HALF[0] - 0.005]
     assert len(top) > 0.8 * len(points)
     assert np.abs(top[:, 2] - TABLE_TOP).max() < 1e-3
-    assert clusters_from_frame(frame, None) == ()
+    assert clusters_from_frame(frame, None, _SCENE_PARAMS) == ()
 
 
 def test_frame_without_valid_depth_gives_no_clusters():
@@ -92,8 +95,8 @@ def test_frame_without_valid_depth_gives_no_clusters():
         K=np.array([[5.0, 0, 3], [0, 5.0, 2], [0, 0, 1]]),
         T_world_camera=np.eye(4),
     )
-    assert clusters_from_frame(frame, None) == ()
-    assert len(cloud_from_frame(frame)[0]) == 0
+    assert clusters_from_frame(frame, None, _SCENE_PARAMS) == ()
+    assert len(cloud_from_frame(frame, None, _SCENE_PARAMS)[0]) == 0
 
 
 # --- clusters: count, pose, extents --------------------------------------------------------
@@ -105,7 +108,7 @@ def test_clusters_are_the_objects_with_their_poses_and_extents(scene, seed):
     names = list(rng.choice([s.name for s in OBJECTS], size=5, replace=False))
     scene.clear()
     truth = {n: (scene.place(n, *p), p[2]) for n, p in random_layout(rng, names, 0.16).items()}
-    found = clusters_from_frame(scene.render(), None)
+    found = clusters_from_frame(scene.render(), None, _SCENE_PARAMS)
 
     assert len(found) == len(names)
     assert sorted(_nearest(truth, c) for c in found) == sorted(names)  # one cluster each
@@ -131,8 +134,8 @@ def test_clusters_are_sorted_and_deterministic(scene, rng):
     for n, p in random_layout(rng, ["white_box", "orange_cube", "green_cylinder"]).items():
         scene.place(n, *p)
     frame = scene.render()
-    a = clusters_from_frame(frame, None)
-    b = clusters_from_frame(frame, None)
+    a = clusters_from_frame(frame, None, _SCENE_PARAMS)
+    b = clusters_from_frame(frame, None, _SCENE_PARAMS)
     assert len(a) == 3
     xs = [c.centroid[0] for c in a]
     assert xs == sorted(xs)
@@ -145,7 +148,7 @@ def test_clusters_are_sorted_and_deterministic(scene, rng):
 def test_cluster_dict_round_trip(scene):
     scene.clear()
     scene.place("white_box", 0.5, 0.1, 0.4)
-    (c,) = clusters_from_frame(scene.render(), None)
+    (c,) = clusters_from_frame(scene.render(), None, _SCENE_PARAMS)
     back = cluster_from_dict(json.loads(json.dumps(cluster_to_dict(c))))
     assert d_cluster(c, back) == 0.0
     np.testing.assert_array_equal(back.centroid, c.centroid)
@@ -160,12 +163,12 @@ def test_self_filter_removes_the_arm_hanging_into_view(scene):
     }
     scene.show_arm()
     frame = scene.render()
-    without = clusters_from_frame(frame, None)
+    without = clusters_from_frame(frame, None, _SCENE_PARAMS)
     assert len(without) > len(truth)  # the arm's points stand on the table as a cluster
-    with_filter = clusters_from_frame(frame, scene.robot_geometry())
+    with_filter = clusters_from_frame(frame, scene.robot_geometry(), _SCENE_PARAMS)
     assert len(with_filter) == len(truth)
     assert sorted(_nearest(truth, c) for c in with_filter) == sorted(truth)
-    points, _ = cloud_from_frame(frame, scene.robot_geometry())
+    points, _ = cloud_from_frame(frame, scene.robot_geometry(), _SCENE_PARAMS)
     g = scene.robot_geometry()
     d = np.linalg.norm(points[:, None, :] - g.centers[None], axis=2)
     assert (d > g.radii).all()
@@ -175,8 +178,8 @@ def test_min_cluster_points_rejects_small_clusters(scene):
     scene.clear()
     scene.place("blue_box_small", 0.75, 0.25, 0.0)  # far: the fewest points
     frame = scene.render()
-    (c,) = clusters_from_frame(frame, None)
-    params = dataclasses.replace(PerceptionParams(), min_cluster_points=c.n_points + 1)
+    (c,) = clusters_from_frame(frame, None, _SCENE_PARAMS)
+    params = dataclasses.replace(PerceptionParams(**CROP), min_cluster_points=c.n_points + 1)
     assert clusters_from_frame(frame, None, params) == ()
 
 
@@ -197,7 +200,7 @@ def test_each_object_is_itself_from_any_pose_and_differs_from_the_others():
 
 # --- distances ---------------------------------------------------------------------------------
 
-_PARAMS = PerceptionParams()
+_PARAMS = PerceptionParams(**CROP)
 _hist = arrays(
     np.float64, len(hsv_histogram(np.zeros((1, 3), np.uint8), _PARAMS)), elements=st.floats(0, 1)
 ).filter(lambda h: h.sum() > 1e-3)
@@ -241,7 +244,7 @@ def test_d_histogram_is_the_textbook_bhattacharyya():
 
 
 def test_histogram_pools_achromatic_pixels_by_brightness():
-    params = PerceptionParams()
+    params = PerceptionParams(**CROP)
     n_chromatic = params.hue_bins * params.sat_bins
     white = hsv_histogram(np.array([[240, 240, 240], [250, 245, 250]], np.uint8), params)
     grey = hsv_histogram(np.array([[120, 120, 120], [125, 128, 126]], np.uint8), params)
@@ -290,7 +293,7 @@ def test_salient_cluster_on_a_rendered_grasp(scene):
         n: scene.place(n, *p)
         for n, p in {"orange_cube": (0.45, -0.1, 0.2), "green_cylinder": (0.62, 0.15, 0.0)}.items()
     }
-    found = clusters_from_frame(scene.render(), None)
+    found = clusters_from_frame(scene.render(), None, _SCENE_PARAMS)
     k = salient_cluster(found, truth["green_cylinder"] + [0.01, -0.01, 0.09])  # place on top
     assert k is not None
     assert np.linalg.norm(found[k].centroid - truth["green_cylinder"]) < 0.01

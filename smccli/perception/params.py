@@ -10,13 +10,14 @@ class PerceptionParams:
     """Knobs of :func:`~smccli.perception.clusters_from_frame` and :func:`d_cluster`.
 
     The crop box is per scene (it must hold the table top and what stands on it, and
-    exclude the floor); the defaults fit a table top at about 0.75 m in front of a robot
-    standing at the origin and facing +x.
+    exclude the floor); the defaults fit the built-in scenes: the world origin at the
+    robot's base on the table top, the table in front along +x (``--set
+    perception.crop_min=...`` for other set-ups).
     """
 
-    crop_min: tuple[float, float, float] = (0.1, -0.7, 0.6)
+    crop_min: tuple[float, float, float] = (0.15, -0.65, -0.05)
     """Lower corner of the workspace box, world frame [m]."""
-    crop_max: tuple[float, float, float] = (1.2, 0.7, 1.4)
+    crop_max: tuple[float, float, float] = (1.0, 0.65, 0.6)
     """Upper corner of the workspace box, world frame [m]."""
     max_depth: float = 5.0
     """Depth readings beyond this are "nothing hit" (renderers return the far plane) [m]."""

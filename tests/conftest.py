@@ -1,0 +1,65 @@
+"""Shared fixtures: a seeded RNG, the sample logs, demos re-recorded with other seeds, trees."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+REPO = Path(__file__).resolve().parent.parent
+SAMPLE_LOGS = REPO / "sample_logs"
+SCENES = ("pick_place", "weigh_sort", "bench_pick")
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(0)
+
+
+def sample_log_paths(scene: str) -> list[Path]:
+    """The committed sample demonstrations of a scene (made by ``make sample-logs``)."""
+    paths = sorted((SAMPLE_LOGS / scene).glob("*.mcap"))
+    assert paths, f"no sample logs under {SAMPLE_LOGS / scene}: run `make sample-logs`"
+    return paths
+
+
+@pytest.fixture(scope="session")
+def sample_logs() -> dict[str, list[Path]]:
+    return {s: sample_log_paths(s) for s in SCENES}
+
+
+@pytest.fixture(scope="session")
+def sample_trees(tmp_path_factory, sample_logs) -> dict[str, Path]:
+    """Each scene's sample demos compiled into a tree."""
+    from smccli.compile import compile_logs
+
+    root = tmp_path_factory.mktemp("trees")
+    out = {}
+    for scene, logs in sample_logs.items():
+        path = root / f"{scene}.json"
+        compile_logs(logs, path)
+        out[scene] = path
+    return out
+
+
+@pytest.fixture(scope="session")
+def reseeded_logs(tmp_path_factory) -> dict[int, dict[str, list[Path]]]:
+    """The sample scripts recorded again with seeds 1 and 2 (tremor, hesitation, speed)."""
+    from smccli.record import RecordConfig, record
+
+    root = tmp_path_factory.mktemp("reseeded")
+    out: dict[int, dict[str, list[Path]]] = {}
+    for seed in (1, 2):
+        out[seed] = {}
+        for scene in SCENES:
+            paths = []
+            for script in sorted((SAMPLE_LOGS / scene).glob("*.yaml")):
+                path = root / f"{scene}_{script.stem}_s{seed}.mcap"
+                record(RecordConfig(scene=scene, script=script, seed=seed, output=path))
+                paths.append(path)
+            out[seed][scene] = paths
+    return out
