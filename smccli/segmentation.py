@@ -187,6 +187,9 @@ def segment(trace: Trace, mode: SegmentMode, *, snap_window: float, min_fragment
             # Two boundaries closer than min_fragment (a double press): keep the later one.
             fragments[-1] = Fragment(t0=fragments[-1].t0, t1=t, cause=cause)
             start = t
+        # else: a boundary right at the start (a press as recording began) cuts nothing.
+    if not fragments:
+        return [Fragment(t0=0.0, t1=trace.t_end, cause="end")]
     return fragments
 
 
