@@ -26,6 +26,7 @@ import yaml
 
 from smccli.controller import reachable, wrap
 from smccli.errors import ScriptError
+from smccli.scene import Layout, Scene, nominal_layout, sample_layout
 from smccli.sensors import PoiCommand, SaliencyMark
 from smccli.sim import Sim
 
@@ -93,6 +94,8 @@ class Script:
     """Relative spread of move durations."""
     description: str = ""
     """What the demonstration shows."""
+    variant: str | None = None
+    """Scene variant (object subset) the demonstration is recorded in; None: the default."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -155,6 +158,7 @@ def parse_script(text: str, source: str = "<text>") -> Script:
         hesitation=float(raw.get("hesitation", 0.0)),
         speed_variation=float(raw.get("speed_variation", 0.0)),
         description=str(raw.get("description", "")),
+        variant=str(raw["variant"]) if "variant" in raw else None,
     )
 
 
@@ -184,11 +188,16 @@ def _step(raw: dict[str, Any], index: int, line: int) -> Step:
     value = raw[kind]
     if kind == "move_to":
         return Step(
-            kind, index, line,
+            kind,
+            index,
+            line,
             object=value.get("object"),
             offset=tuple(float(v) for v in value.get("offset", (0, 0, 0))),  # type: ignore[arg-type]
-            position=(tuple(float(v) for v in value["position"])  # type: ignore[arg-type]
-                      if "position" in value else None),
+            position=(
+                tuple(float(v) for v in value["position"])  # type: ignore[arg-type]
+                if "position" in value
+                else None
+            ),
             yaw=float(value["yaw"]) if "yaw" in value else (0.0 if "object" in value else None),
             duration=float(value["duration"]) if "duration" in value else None,
         )
@@ -235,12 +244,12 @@ class ScriptOperator:
                 f"{script.source}: written for scene {script.scene!r}, "
                 f"but the simulation runs {sim.scene.name!r}"
             )
-        names = [o.name for o in sim.scene.objects]
+        names = [o.name for o in sim.scene.objects if o.name in sim.present]
         for step in script.steps:
             if step.object is not None and step.object not in names:
                 raise ScriptError(
                     f"{step.where(script.source)}: no object {step.object!r} in scene "
-                    f"{sim.scene.name} (objects: {', '.join(names)})"
+                    f"{sim.scene.name} as laid out (objects: {', '.join(names)})"
                 )
         self.script = script
         self.sim = sim
@@ -300,7 +309,9 @@ class ScriptOperator:
         act.goal = goal
         dist = float(np.linalg.norm(goal[:3] - act.start[:3]))
         duration = step.duration or max(
-            MIN_MOVE_TIME, dist / self.script.speed, abs(goal[3] - act.start[3]) / self.script.yaw_speed
+            MIN_MOVE_TIME,
+            dist / self.script.speed,
+            abs(goal[3] - act.start[3]) / self.script.yaw_speed,
         )
         v = self.script.speed_variation
         hesitate = self.rng.uniform() < self.script.hesitation
@@ -315,7 +326,9 @@ class ScriptOperator:
             x, y, z, oyaw = self.sim.object_pose(step.object)
             c, s = math.cos(oyaw), math.sin(oyaw)
             dx, dy, dz = step.offset
-            goal = np.array([x + c * dx - s * dy, y + s * dx + c * dy, z + dz, oyaw + (step.yaw or 0)])
+            goal = np.array(
+                [x + c * dx - s * dy, y + s * dx + c * dy, z + dz, oyaw + (step.yaw or 0)]
+            )
         else:
             assert step.position is not None
             yaw = self._target[3] if step.yaw is None else step.yaw
@@ -359,3 +372,13 @@ def run_script(script: Script, sim: Sim, seed: int = 0, *, max_time: float = 600
             return
         if sim.t > max_time:
             raise ScriptError(f"{script.source}: still running after {max_time:.0f} s")
+
+
+def script_layout(scene: Scene, script: Script, rng: np.random.Generator | None = None) -> Layout:
+    """The layout a script is played in: its variant, nominal, or sampled with ``rng``."""
+    variant = script.variant
+    if variant is None and scene.variants:
+        variant = scene.variants[0][0]
+    if rng is None:
+        return nominal_layout(scene, variant)
+    return sample_layout(scene, rng, variant=variant)

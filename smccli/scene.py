@@ -43,7 +43,7 @@ class ObjectSpec:
     shape: str
     """One of :data:`SHAPES`."""
     size: tuple[float, float, float]
-    """Full extents of the bounding box along the object's x, y, z [m] (cylinder: x = y = diameter)."""
+    """Full extents of the bounding box along x, y, z [m] (cylinder: x = y = diameter)."""
     rgba: tuple[float, float, float, float]
     """Colour, each in [0, 1]."""
     mass: float
@@ -221,7 +221,7 @@ def load_scene_from_text(yaml_text: str, mjcf_text: str) -> Scene:
         poi=poi,
         success=success,
         description=str(raw.get("description", "")),
-        variants=_variants(raw, objects, where),
+        variants=_variants(raw, objects, "<embedded scene.yaml>"),
     )
 
 
@@ -353,7 +353,8 @@ def _parse(
                 for n in (cond.object, cond.target):
                     if n not in names:
                         raise SceneError(
-                            f"{where}: success.{task}: no object {n!r} (objects: {', '.join(names)})"
+                            f"{where}: success.{task}: no object {n!r} "
+                            f"(objects: {', '.join(names)})"
                         )
                 items.append(cond)
             conds[key] = tuple(items)

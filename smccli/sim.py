@@ -101,7 +101,10 @@ class Sim:
         """Robot at home with the gripper open, objects at ``layout`` (default nominal)."""
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
-        layout = nominal_layout(self.scene) if layout is None else layout
+        if layout is None:
+            # A scene with variants has look-alike objects sharing a nominal pose: show one.
+            first = self.scene.variants[0][0] if self.scene.variants else None
+            layout = nominal_layout(self.scene, first)
         for name, (x, y, z, yaw) in layout.items():
             if name not in self._body:
                 valid = ", ".join(self._body)
@@ -209,7 +212,7 @@ class Sim:
                 r, half = float(size[0]), float(size[1])
                 n = max(1, math.ceil(half / r))
                 if gtype == capsule:  # spheres of the capsule's radius along its segment
-                    offsets = np.linspace(-half, half, n + 1)
+                    offsets: np.ndarray = np.linspace(-half, half, n + 1)
                     rad = r
                 else:  # n slices, each inside a sphere through its rim
                     offsets = -half + half / n * (2 * np.arange(n) + 1)

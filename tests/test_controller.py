@@ -46,8 +46,12 @@ def test_tracking_is_accurate_over_workspace_and_yaws() -> None:
     rng = np.random.default_rng(1)
     for _ in range(12):
         target = np.array(
-            [rng.uniform(0.33, 0.62), rng.uniform(-0.4, 0.4), rng.uniform(0.03, 0.3),
-             rng.uniform(-math.pi, math.pi)]
+            [
+                rng.uniform(0.33, 0.62),
+                rng.uniform(-0.4, 0.4),
+                rng.uniform(0.03, 0.3),
+                rng.uniform(-math.pi, math.pi),
+            ]
         )
         for _ in range(300):  # a long way round the wrist takes up to 2.5 s
             sim.step(PoiCommand(sim.t, target, 1.0))

@@ -18,6 +18,7 @@ from smccli.operators import (
     minimum_jerk,
     parse_script,
     run_script,
+    script_layout,
 )
 from smccli.scene import load_scene
 from smccli.sim import Sim
@@ -44,7 +45,8 @@ def test_sample_scripts_are_schema_valid() -> None:
 @pytest.mark.parametrize("path", SAMPLES, ids=lambda p: f"{p.parent.name}/{p.stem}")
 def test_sample_script_succeeds(path: Path) -> None:
     script = load_script(path)
-    sim = Sim(load_scene(script.scene))
+    scene = load_scene(script.scene)
+    sim = Sim(scene, script_layout(scene, script))
     marks = []
     for out in run_script(script, sim, seed=0):
         for mark in out.marks:
@@ -64,7 +66,8 @@ def test_weigh_demos_read_different_weights() -> None:
     weights = {}
     for stem in ("demo_light", "demo_heavy"):
         script = load_script(ROOT / "sample_logs" / "weigh_sort" / f"{stem}.yaml")
-        sim = Sim(load_scene("weigh_sort"))
+        scene = load_scene("weigh_sort")
+        sim = Sim(scene, script_layout(scene, script, np.random.default_rng(1)))
         for out in run_script(script, sim, seed=1):
             if any(m.label == "on_scale" for m in out.marks):
                 weights[stem] = sim.weight()
@@ -113,6 +116,7 @@ def test_grasp_holds_during_a_fast_move() -> None:
     script = parse_script(
         """\
 scene: weigh_sort
+variant: heavy
 steps:
   - move_to: {object: heavy_box, offset: [0, 0, 0.1]}
   - move_to: {object: heavy_box, offset: [0, 0, 0]}
@@ -121,10 +125,11 @@ steps:
   - move_to: {position: [0.55, -0.3, 0.15], yaw: -0.5, duration: 0.6}
 """
     )
-    sim = Sim(load_scene("weigh_sort"))
+    scene = load_scene("weigh_sort")
+    sim = Sim(scene, script_layout(scene, script))
     offsets = []
     moving = False
-    for out in run_script(script, sim):
+    for _ in run_script(script, sim):
         moving = moving or sim.poi()[2] > 0.1 and sim.gripper_opening() < 0.9
         if moving:
             offsets.append(np.linalg.norm(sim.ground_truth()["heavy_box"][:3] - sim.poi()[:3]))
@@ -163,7 +168,9 @@ def test_unreachable_target_names_step_and_line() -> None:
         "scene: pick_place\nsteps:\n  - mark: a\n  - move_to: {position: [1.5, 0, 0.2]}\n", "s.yaml"
     )
     sim = Sim(load_scene("pick_place"))
-    with pytest.raises(ScriptError, match=r"s.yaml: step 1 \(line 4, move_to\).*out of the robot's reach"):
+    with pytest.raises(
+        ScriptError, match=r"s.yaml: step 1 \(line 4, move_to\).*out of the robot's reach"
+    ):
         list(run_script(script, sim))
 
 

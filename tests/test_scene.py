@@ -46,7 +46,9 @@ def test_unknown_scene_lists_valid_names() -> None:
 
 def test_bad_scene_file_names_the_file(tmp_path) -> None:
     bad = tmp_path / "scene.yaml"
-    bad.write_text("name: x\nobjects:\n  - {name: a, shape: sphere, size: [1, 1, 1], pose: [0, 0, 0, 0]}\n")
+    bad.write_text(
+        "name: x\nobjects:\n  - {name: a, shape: sphere, size: [1, 1, 1], pose: [0, 0, 0, 0]}\n"
+    )
     (tmp_path / "scene.xml").write_text("<mujoco/>")
     with pytest.raises(SceneError, match=r"scene.yaml.*sphere.*box"):
         load_scene(bad)
@@ -65,7 +67,13 @@ def test_sample_layout_in_ranges_without_overlap() -> None:
         rng = np.random.default_rng(0)
         for _ in range(50):
             layout = sample_layout(scene, rng)
+            variants = [set(names) for _, names in scene.variants]
+            optional = set().union(*variants) if variants else set()
+            present = set(layout) & optional
+            assert not variants or present in variants  # exactly one variant's objects
             for o in scene.objects:
+                if o.name not in layout:
+                    continue
                 x, y, _, yaw = layout[o.name]
                 assert o.range_x[0] <= x <= o.range_x[1]
                 assert o.range_y[0] <= y <= o.range_y[1]
@@ -80,6 +88,8 @@ def test_sample_layout_in_ranges_without_overlap() -> None:
             scene, np.random.default_rng(3)
         )
         assert set(nominal_layout(scene)) == {o.name for o in scene.objects}
+        for variant, names in scene.variants:
+            assert set(names) <= set(nominal_layout(scene, variant))
 
 
 def test_bench_pick_ranges_as_in_the_paper() -> None:
