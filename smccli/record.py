@@ -109,19 +109,21 @@ def record(cfg: RecordConfig, on_status: Callable[[RecordStatus], None] | None =
     scene = load_scene(cfg.scene)
     extra: dict[str, str] = {}
     if cfg.operator == "script":
-        from smccli.operators import ScriptOperator, load_script
+        from smccli.operators import ScriptOperator, load_script, script_layout
 
         if cfg.script is None:
             raise ScriptError("--operator script needs --script FILE")
         script = load_script(cfg.script)
-        layout = script_layout(scene, script, cfg)
+        layout = script_layout(scene, script, _rng(cfg.seed) if cfg.randomize else None)
         sim = Sim(scene, layout)
         operator = ScriptOperator(script, sim, seed=cfg.seed)
         extra["script"] = Path(cfg.script).name
     elif cfg.operator == "keyboard":
         from smccli.keyboard import KeyboardOperator
 
-        layout = sample_layout(scene, _rng(cfg.seed)) if cfg.randomize else nominal_layout(scene)
+        first = scene.variants[0][0] if scene.variants else None
+        layout = (sample_layout(scene, _rng(cfg.seed)) if cfg.randomize
+                  else nominal_layout(scene, first))
         sim = Sim(scene, layout)
         operator = KeyboardOperator(sim)
     else:
@@ -193,8 +195,3 @@ def _rng(seed: int):
     return np.random.default_rng(seed)
 
 
-def script_layout(scene: Scene, script, cfg: RecordConfig):
-    """Layout a script starts from: random with ``randomize``, else the nominal one."""
-    if cfg.randomize:
-        return sample_layout(scene, _rng(cfg.seed))
-    return nominal_layout(scene)
