@@ -81,14 +81,24 @@ def fit_table_plane(points: np.ndarray, params: PerceptionParams) -> np.ndarray 
         plane = -plane
     if np.arccos(np.clip(plane[2], -1.0, 1.0)) > params.plane_max_tilt or len(inliers) < 3:
         return None  # the biggest plane is a wall or an object face: no table in view
-    # Least-squares refinement on the inliers: the plane through their mean, normal =
-    # direction of least variance.
-    inl = points[np.abs(plane_distance(points, plane)) < params.plane_distance]
-    mean = inl.mean(axis=0)
-    centered = inl - mean
-    _, vecs = np.linalg.eigh(np.einsum("ni,nj->ij", centered, centered))
-    normal = vecs[:, 0] if vecs[2, 0] > 0 else -vecs[:, 0]
-    return np.r_[normal, -float(np.dot(normal, mean))]
+    # Least-squares refinement on the inliers, iterated to a fixed point: the plane through
+    # their mean, normal = direction of least variance. open3d's RANSAC runs on several
+    # threads and, on a busy machine, need not return the same hypothesis twice; the
+    # refined inlier set converges to the same set of table points from any nearby
+    # hypothesis, so the same frame always gives bit-identical planes (and trees).
+    mask = np.abs(plane_distance(points, plane)) < params.plane_distance
+    for _ in range(10):
+        inl = points[mask]
+        mean = inl.mean(axis=0)
+        centered = inl - mean
+        _, vecs = np.linalg.eigh(np.einsum("ni,nj->ij", centered, centered))
+        normal = vecs[:, 0] if vecs[2, 0] > 0 else -vecs[:, 0]
+        plane = np.r_[normal, -float(np.dot(normal, mean))]
+        new_mask = np.abs(plane_distance(points, plane)) < params.plane_distance
+        if np.array_equal(new_mask, mask):
+            break
+        mask = new_mask
+    return plane
 
 
 def plane_distance(points: np.ndarray, plane: np.ndarray) -> np.ndarray:

@@ -1,0 +1,100 @@
+"""The keyboard operator, driven for real: MuJoCo's viewer under Xvfb, keys sent by xdotool."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from smccli.logs import read_log
+
+pytestmark = pytest.mark.viewer
+
+
+@pytest.fixture
+def display():
+    if not (shutil.which("Xvfb") and shutil.which("xdotool")):
+        pytest.fail("Xvfb and xdotool are needed (make setup installs them)")
+    for n in range(90, 140):
+        if not os.path.exists(f"/tmp/.X11-unix/X{n}") and not os.path.exists(f"/tmp/.X{n}-lock"):
+            break
+    xvfb = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 10
+    while not os.path.exists(f"/tmp/.X11-unix/X{n}"):
+        assert time.monotonic() < deadline, "Xvfb did not start"
+        time.sleep(0.1)
+    yield f":{n}"
+    xvfb.terminate()
+    xvfb.wait(timeout=10)
+
+
+def _window(env: dict, timeout: float = 60.0) -> str:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        found = subprocess.run(["xdotool", "search", "--onlyvisible", "--name", "MuJoCo"], env=env,
+                               capture_output=True, text=True)
+        if found.stdout.strip():
+            return found.stdout.split()[0]
+        time.sleep(0.3)
+    raise AssertionError("the MuJoCo viewer window did not appear")
+
+
+def _keys(env: dict, window: str, *keys: str, pause: float = 0.15) -> None:
+    for k in keys:
+        subprocess.run(["xdotool", "key", "--window", window, k], env=env, check=True)
+        time.sleep(pause)
+
+
+def _record(tmp_path, display):
+    out = tmp_path / "kb.mcap"
+    env = {**os.environ, "DISPLAY": display, "MUJOCO_GL": "glfw"}
+    proc = subprocess.Popen([sys.executable, "-m", "smccli.cli", "record", "--scene",
+                             "pick_place", "--operator", "keyboard", "-o", str(out)],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return out, env, proc
+
+
+def test_keys_move_the_target_toggle_the_gripper_and_mark(tmp_path, display):
+    out, env, proc = _record(tmp_path, display)
+    try:
+        win = _window(env)
+        subprocess.run(["xdotool", "windowfocus", win], env=env)
+        time.sleep(2.0)
+        _keys(env, win, *["Up"] * 5, *["Page_Down"] * 3, "q")
+        _keys(env, win, "g", pause=1.5)
+        _keys(env, win, "m", "Return")
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, stderr
+    log = read_log(out)
+    first, last = log.commands[0], log.commands[-1]
+    np.testing.assert_allclose(last.target[:3] - first.target[:3], [0.05, 0.0, -0.03], atol=1e-6)
+    assert last.target[3] - first.target[3] == pytest.approx(np.radians(5))
+    assert first.gripper == 1.0 and last.gripper == 0.0
+    assert [m.source for m in log.marks] == ["operator"]
+    # The robot followed: the POI moved forward and down with the target.
+    assert log.poi[-1][0] - log.poi[0][0] > 0.04
+    assert {"/camera/color", "/camera/depth", "/robot/joint_states"} <= set(log.topic_counts)
+
+
+def test_discard_writes_nothing(tmp_path, display):
+    out, env, proc = _record(tmp_path, display)
+    try:
+        win = _window(env)
+        subprocess.run(["xdotool", "windowfocus", win], env=env)
+        time.sleep(2.0)
+        _keys(env, win, "Up", "x")
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 2 and "discarded" in stderr
+    assert not out.exists() and not (tmp_path / "kb.mcap.part").exists()
