@@ -45,6 +45,20 @@ def _window(env: dict, timeout: float = 60.0) -> str:
     raise AssertionError("the MuJoCo viewer window did not appear")
 
 
+def _focus(env: dict, window: str, timeout: float = 20.0) -> None:
+    """Give the viewer the keyboard focus and wait until X reports it has it."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        subprocess.run(["xdotool", "windowfocus", window], env=env, capture_output=True)
+        got = subprocess.run(["xdotool", "getwindowfocus"], env=env, capture_output=True,
+                             text=True).stdout.strip()
+        if got == window:
+            time.sleep(1.0)  # the viewer's event loop polls a few times a second
+            return
+        time.sleep(0.3)
+    raise AssertionError("the viewer window never got the keyboard focus")
+
+
 def _keys(env: dict, window: str, *keys: str, pause: float = 0.15) -> None:
     for k in keys:
         subprocess.run(["xdotool", "key", "--window", window, k], env=env, check=True)
@@ -64,8 +78,7 @@ def test_keys_move_the_target_toggle_the_gripper_and_mark(tmp_path, display):
     out, env, proc = _record(tmp_path, display)
     try:
         win = _window(env)
-        subprocess.run(["xdotool", "windowfocus", win], env=env)
-        time.sleep(2.0)
+        _focus(env, win)
         _keys(env, win, *["Up"] * 5, *["Page_Down"] * 3, "q")
         _keys(env, win, "g", pause=1.5)
         _keys(env, win, "m", "Return")
@@ -89,8 +102,7 @@ def test_discard_writes_nothing(tmp_path, display):
     out, env, proc = _record(tmp_path, display)
     try:
         win = _window(env)
-        subprocess.run(["xdotool", "windowfocus", win], env=env)
-        time.sleep(2.0)
+        _focus(env, win)
         _keys(env, win, "Up", "x")
         _, stderr = proc.communicate(timeout=60)
     finally:
