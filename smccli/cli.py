@@ -13,6 +13,7 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
@@ -60,12 +61,13 @@ def record(
     output: Annotated[Path, typer.Option("-o", "--output", help="Log to write (.mcap).")] = Path("demo.mcap"),
     force: Annotated[bool, typer.Option(help="Overwrite an existing log.")] = False,
     randomize: Annotated[bool, typer.Option(help="Start from a random layout (else nominal).")] = False,
+    realtime: Annotated[bool, typer.Option(help="Pace the script operator at real time.")] = False,
 ) -> None:
     """Record a demonstration into an MCAP log."""
     from smccli.record import RecordConfig, record as run_record
 
     cfg = RecordConfig(scene=scene, operator=operator.value, script=script, seed=seed,
-                       output=output, force=force, randomize=randomize)
+                       output=output, force=force, randomize=randomize, realtime=realtime)
     with Progress(TextColumn("[bold]recording[/]"), TextColumn("{task.description}"),
                   TimeElapsedColumn(), console=err, transient=True) as progress:
         task = progress.add_task("", total=None)
@@ -191,7 +193,9 @@ def main() -> None:
     try:
         app()
     except SmcError as exc:
-        err.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+        # One line, whatever the message holds: scripts and CI grep for it.
+        message = escape(" ".join(str(exc).split()))
+        err.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True, markup=True)
         sys.exit(exc.exit_code)
     except KeyboardInterrupt:
         err.print("interrupted")

@@ -26,7 +26,7 @@ import yaml
 
 from smccli.controller import reachable, wrap
 from smccli.errors import ScriptError
-from smccli.scene import Layout, Scene, nominal_layout, sample_layout
+from smccli.scene import Layout, Scene, nominal_layout, sample_layout, yaml_problem
 from smccli.sensors import PoiCommand, SaliencyMark
 from smccli.sim import Sim
 
@@ -131,7 +131,7 @@ def parse_script(text: str, source: str = "<text>") -> Script:
         raw = yaml.safe_load(text)
         root = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.YAMLError as exc:
-        raise ScriptError(f"{source}: not valid YAML: {exc}") from exc
+        raise ScriptError(f"{source}: not valid YAML: {yaml_problem(exc)}") from exc
     lines = _step_lines(root)
     errors = sorted(
         jsonschema.Draft202012Validator(_schema()).iter_errors(raw),

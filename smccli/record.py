@@ -45,6 +45,8 @@ class RecordConfig:
     """Start from a random layout of the scene instead of the nominal one."""
     ground_truth_rate: float = 10.0
     """Rate of ``/sim/ground_truth`` [Hz] (evaluation only)."""
+    realtime: bool = False
+    """Pace the script operator at real time, as a person would (keyboard: always)."""
     reproducible: bool = False
     """Cut chunks on simulation time only, so the same script and seed give a byte-identical
     file (sample logs); otherwise also every wall-clock second, for crash safety."""
@@ -139,10 +141,18 @@ def record(cfg: RecordConfig, on_status: Callable[[RecordStatus], None] | None =
                        attachments=scene_attachments(scene), force=cfg.force,
                        wall_clock_flush=not cfg.reproducible) as writer:
             _log_state(writer, sim)
+            frame = sim.render_camera()
+            _log_cloud(writer, sim, frame)  # what the robot saw as the demonstration began
+            t_wall0 = time.perf_counter()
             while True:
                 t = sim.t
+                if cfg.realtime and cfg.operator == "script":
+                    ahead = t - (time.perf_counter() - t_wall0)
+                    if ahead > 0:
+                        time.sleep(ahead)
                 if t >= next_cam - 1e-9:
-                    writer.write_camera(sim.render_camera())
+                    frame = sim.render_camera() if t > 0 else frame
+                    writer.write_camera(frame)
                     next_cam += cam_period
                 if t >= next_gt - 1e-9:
                     writer.write_ground_truth(t, sim.ground_truth())
@@ -151,6 +161,8 @@ def record(cfg: RecordConfig, on_status: Callable[[RecordStatus], None] | None =
                 for mark in step.marks:
                     writer.write_saliency(mark)
                     marks += 1
+                if step.marks:  # the scene at each salient moment, for inspection
+                    _log_cloud(writer, sim, frame)
                 if step.done:
                     break
                 writer.write_command(step.command)
@@ -187,6 +199,14 @@ def _log_state(writer: LogWriter, sim: Sim) -> None:
     w = sim.weight()
     if w is not None:
         writer.write_weight(t, w)
+
+
+def _log_cloud(writer: LogWriter, sim: Sim, frame) -> None:
+    """World-frame point cloud of the workspace (robot removed) on ``/perception/points``."""
+    from smccli.perception import PerceptionParams, cloud_from_frame
+
+    points, colors = cloud_from_frame(frame, sim.robot_geometry(), PerceptionParams())
+    writer.write_point_cloud(sim.t, points[::2].astype("float32"), colors[::2])
 
 
 def _rng(seed: int):

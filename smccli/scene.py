@@ -276,11 +276,19 @@ def _overlaps(scene: Scene, layout: Layout, gap: float) -> bool:
 # --- scene file parsing ---------------------------------------------------------------
 
 
+def yaml_problem(exc: yaml.YAMLError) -> str:
+    """One line for a YAML error: the problem and where (line, column, 1-based)."""
+    mark = getattr(exc, "problem_mark", None)
+    problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+    at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+    return f"{problem}{at}"
+
+
 def _parse_yaml(text: str, where: str) -> dict[str, Any]:
     try:
         raw = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise SceneError(f"{where}: not valid YAML: {exc}") from exc
+        raise SceneError(f"{where}: not valid YAML: {yaml_problem(exc)}") from exc
     if not isinstance(raw, dict) or "name" not in raw or "objects" not in raw:
         raise SceneError(f"{where}: expected a mapping with 'name' and 'objects'")
     return raw

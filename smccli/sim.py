@@ -23,6 +23,8 @@ from smccli.controller import (
     poi_pose,
 )
 from smccli.errors import SceneError
+from smccli.robot_model import geometry as robot_geometry
+from smccli.robot_model import robot_body_ids
 from smccli.scene import Condition, Layout, ObjectSpec, Scene, nominal_layout
 from smccli.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
 
@@ -84,6 +86,7 @@ class Sim:
         base = self._id(mujoco.mjtObj.mjOBJ_BODY, "arm_base")
         self._robot_geoms = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == base]
         self._renderer: mujoco.Renderer | None = None
+        self._robot_bodies: np.ndarray | None = None
         self._last = PoiCommand(0.0, np.zeros(4), 1.0)
         self.reset(layout)
 
@@ -198,32 +201,14 @@ class Sim:
         return float(self.data.sensordata[a + 2])  # type: ignore[operator]
 
     def robot_geometry(self) -> RobotGeometry:
-        """Bounding spheres of the robot's geoms from its own kinematics (for self-filtering).
+        """Bounding spheres of the robot's moving links from its own kinematics (self-filter).
 
-        Capsules and cylinders become a row of spheres along their axis; boxes one sphere.
+        The same function compile applies to logged joint states (:mod:`smccli.robot_model`),
+        so replay perceives exactly as compile did.
         """
-        m, d = self.model, self.data
-        centers, radii = [], []
-        capsule, cylinder = int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_CYLINDER)
-        for g in self._robot_geoms:
-            pos, R, size = d.geom_xpos[g], d.geom_xmat[g].reshape(3, 3), m.geom_size[g]
-            gtype = int(m.geom_type[g])
-            if gtype in (capsule, cylinder):
-                r, half = float(size[0]), float(size[1])
-                n = max(1, math.ceil(half / r))
-                if gtype == capsule:  # spheres of the capsule's radius along its segment
-                    offsets: np.ndarray = np.linspace(-half, half, n + 1)
-                    rad = r
-                else:  # n slices, each inside a sphere through its rim
-                    offsets = -half + half / n * (2 * np.arange(n) + 1)
-                    rad = math.hypot(r, half / n)
-                for s in offsets:
-                    centers.append(pos + R[:, 2] * s)
-                    radii.append(rad)
-            else:
-                centers.append(pos.copy())
-                radii.append(float(m.geom_rbound[g]))
-        return RobotGeometry(centers=np.array(centers), radii=np.array(radii))
+        if self._robot_bodies is None:
+            self._robot_bodies = robot_body_ids(self.model, tuple(self._jnames))
+        return robot_geometry(self.model, self.data, self._robot_bodies)
 
     # --- camera ------------------------------------------------------------------------
 

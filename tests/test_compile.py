@@ -134,7 +134,7 @@ def test_bad_logs_leave_the_tree_untouched(sample_logs, tmp_path):
     for bad, message in [(garbage, "garbage.mcap"), (no_depth, "/camera/depth missing"),
                          (tmp_path / "absent.mcap", "absent.mcap")]:
         with pytest.raises(LogError, match=message):
-            compile_logs([*sample_logs["pick_place"], bad], out)
+            compile_logs([*sample_logs["bench_pick"], bad], out)
         assert out.read_bytes() == before
 
 
