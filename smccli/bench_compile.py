@@ -1,0 +1,142 @@
+"""Benchmark of ``smc compile``: time and peak memory at 1, 10 and 100 demonstrations, and
+perception separability (D_P of each object against itself and the others).
+
+    python -m smccli.bench_compile [--sizes 1 10 100] [--poses 100]
+
+Demonstrations are the bench_pick and weigh_sort sample scripts recorded with seeds
+0, 1, 2, ... (operator tremor, hesitation and speed variation differ each time), cached
+under ``out/bench/demos``. Each compile runs in a fresh process so its peak RSS is its own.
+Separability renders every movable object of the built-in scenes at ``--poses`` random
+poses (the scene's ranges, any yaw) with the real camera and perception; the object's
+cluster is identified by the layout (evaluation only). Results: ``docs/bench_compile.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+CACHE = ROOT / "out" / "bench" / "demos"
+
+_CHILD = """
+import resource, sys, time, json
+from pathlib import Path
+from smccli.compile import compile_logs
+logs = [Path(p) for p in sys.argv[2:]]
+t0 = time.perf_counter()
+r = compile_logs(logs, Path(sys.argv[1]), rebuild=True)
+dt = time.perf_counter() - t0
+print(json.dumps({"seconds": dt, "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                  "nodes": len(r.tree.nodes), "edges": len(r.tree.edges)}))
+"""
+
+
+def demos(n: int, scene: str = "bench_pick", script: str = "demo.yaml") -> list[Path]:
+    """``n`` recordings of a sample script with seeds 0..n-1 (cached)."""
+    from smccli.record import RecordConfig, record
+
+    CACHE.mkdir(parents=True, exist_ok=True)
+    out = []
+    for seed in range(n):
+        path = CACHE / f"{scene}_{Path(script).stem}_s{seed}.mcap"
+        if not path.exists():
+            record(RecordConfig(scene=scene, script=ROOT / "sample_logs" / scene / script,
+                                seed=seed, output=path, reproducible=True))
+        out.append(path)
+    return out
+
+
+def compile_scaling(sizes: list[int]) -> list[dict]:
+    logs = demos(max(sizes))
+    rows = []
+    for n in sizes:
+        tree = CACHE.parent / f"tree_{n}.json"
+        proc = subprocess.run([sys.executable, "-c", _CHILD, str(tree), *map(str, logs[:n])],
+                              capture_output=True, text=True, check=True)
+        row = json.loads(proc.stdout.strip().splitlines()[-1])
+        row.update(demos=n, seconds_per_demo=row["seconds"] / n)
+        rows.append(row)
+        print(f"compile {n:4d} demos: {row['seconds']:7.2f} s ({row['seconds_per_demo']:.2f} "
+              f"s/demo), peak RSS {row['peak_rss_mb']:.0f} MB, tree {row['nodes']} nodes "
+              f"{row['edges']} edges")
+    return rows
+
+
+def separability(n_poses: int, seed: int = 0) -> dict:
+    """D_P (cluster part) same-object vs different-object percentiles over random poses."""
+    from smccli.perception import PerceptionParams, clusters_from_frame, d_cluster
+    from smccli.scene import load_scene, sample_layout
+    from smccli.sim import Sim
+
+    params = PerceptionParams()
+    rng = np.random.default_rng(seed)
+    seen: dict[str, list] = {}
+    for scene_name in ("pick_place", "weigh_sort", "bench_pick"):
+        scene = load_scene(scene_name)
+        movable = [o.name for o in scene.objects if not o.fixed and o.range_x[0] < o.range_x[1]]
+        sim = Sim(scene)
+        variants = [v for v, _ in scene.variants] or [None]
+        for i in range(n_poses * len(variants)):
+            variant = variants[i % len(variants)]
+            layout = sample_layout(scene, rng, variant=variant)
+            sim.reset(layout)
+            clusters = clusters_from_frame(sim.render_camera(), sim.robot_geometry(), params)
+            for name in movable:
+                if name not in layout:
+                    continue
+                x, y = layout[name][:2]
+                near = [c for c in clusters if np.hypot(c.centroid[0] - x, c.centroid[1] - y) < 0.03]
+                if len(near) == 1:
+                    seen.setdefault(f"{scene_name}/{name}", []).append(near[0])
+        sim.close()
+    # The two weigh_sort boxes look alike by design (only the scale tells them apart).
+    alike = {frozenset({"weigh_sort/light_box", "weigh_sort/heavy_box"})}
+    same, diff, per_object = [], [], {}
+    names = sorted(seen)
+    for name in names:
+        cs = seen[name][:n_poses]
+        d = [d_cluster(a, b, params) for a, b in itertools.combinations(cs, 2)]
+        same += d
+        per_object[name] = {"poses": len(cs), "p99_same": float(np.percentile(d, 99))}
+    for a, b in itertools.combinations(names, 2):
+        if frozenset({a, b}) in alike:
+            continue
+        ca, cb = seen[a][:30], seen[b][:30]
+        d = [d_cluster(x, y, params) for x in ca for y in cb]
+        diff += d
+        per_object[a].setdefault("min_other", 1e9)
+        per_object[a]["min_other"] = min(per_object[a]["min_other"], float(np.min(d)))
+    out = {"poses_per_object": n_poses, "same_p99": float(np.percentile(same, 99)),
+           "same_max": float(np.max(same)), "different_p1": float(np.percentile(diff, 1)),
+           "different_min": float(np.min(diff)), "t_hp": 0.1, "objects": per_object}
+    print(f"separability over {n_poses} poses/object: same-object p99 {out['same_p99']:.3f} "
+          f"(max {out['same_max']:.3f}), different-object p1 {out['different_p1']:.3f} "
+          f"(min {out['different_min']:.3f}); T_hP = 0.1")
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--sizes", type=int, nargs="+", default=[1, 10, 100])
+    ap.add_argument("--poses", type=int, default=100)
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    doc = {"command": "python -m smccli.bench_compile " + " ".join(sys.argv[1:]),
+           "cpus": os.cpu_count(), "compile": compile_scaling(args.sizes),
+           "separability": separability(args.poses)}
+    doc["wall_s"] = round(time.perf_counter() - t0, 1)
+    (ROOT / "docs").mkdir(exist_ok=True)
+    (ROOT / "docs" / "bench_compile.json").write_text(json.dumps(doc, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
