@@ -13,7 +13,6 @@ Same script, scene, layout and seed: the same command stream.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from functools import cache
@@ -27,10 +26,10 @@ import yaml
 from smccli.controller import reachable, wrap
 from smccli.errors import ScriptError
 from smccli.scene import Layout, Scene, nominal_layout, sample_layout, yaml_problem
+from smccli.schemas import load_schema
 from smccli.sensors import PoiCommand, SaliencyMark
 from smccli.sim import Sim
 
-SCHEMA_PATH = Path(__file__).resolve().parents[1] / "schemas" / "teleop_script.schema.json"
 TREMOR_TIME_CONSTANT = 0.15
 """Correlation time of the tremor noise [s]."""
 MIN_MOVE_TIME = 0.5
@@ -112,7 +111,7 @@ class OperatorOutput:
 
 @cache
 def _schema() -> dict[str, Any]:
-    return json.loads(SCHEMA_PATH.read_text())  # type: ignore[no-any-return]
+    return load_schema("teleop_script")
 
 
 def load_script(path: str | Path) -> Script:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import jsonschema
@@ -12,7 +11,6 @@ import yaml
 
 from smccli.errors import ScriptError
 from smccli.operators import (
-    SCHEMA_PATH,
     ScriptOperator,
     load_script,
     minimum_jerk,
@@ -21,6 +19,7 @@ from smccli.operators import (
     script_layout,
 )
 from smccli.scene import load_scene
+from smccli.schemas import load_schema
 from smccli.sim import Sim
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -35,7 +34,7 @@ EXPECTED_MARKS = {
 
 
 def test_sample_scripts_are_schema_valid() -> None:
-    schema = json.loads(SCHEMA_PATH.read_text())
+    schema = load_schema("teleop_script")
     jsonschema.Draft202012Validator.check_schema(schema)
     assert len(SAMPLES) == 5
     for path in SAMPLES:

@@ -13,7 +13,6 @@ from __future__ import annotations
 import functools
 import json
 import math
-from pathlib import Path
 from typing import Any
 
 import cv2
@@ -26,6 +25,8 @@ from foxglove_schemas_protobuf.LaserScan_pb2 import LaserScan
 from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 from google.protobuf.message import Message as ProtoMessage
+
+from smccli.schemas import schema_path
 
 COMMAND = "/teleop/command"
 JOINT_STATES = "/robot/joint_states"
@@ -73,19 +74,10 @@ def to_ns(t: float) -> int:
     return int(round(t * 1e9))
 
 
-def schema_dir() -> Path:
-    """``schemas/`` beside the package (editable install) or inside it (wheel)."""
-    here = Path(__file__).resolve().parent.parent
-    for candidate in (here / "schemas", here.parent / "schemas"):
-        if candidate.is_dir():
-            return candidate
-    raise FileNotFoundError(f"schemas/ not found near {here}")
-
-
 @functools.cache
 def json_schema_bytes(topic: str) -> bytes:
     """The JSON Schema file of a JSON topic, byte for byte as stored in the log."""
-    return (schema_dir() / f"{JSON_TOPICS[topic]}.schema.json").read_bytes()
+    return schema_path(JSON_TOPICS[topic]).read_bytes()
 
 
 @functools.cache
