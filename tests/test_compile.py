@@ -159,3 +159,15 @@ def test_cli_prints_the_tree(sample_logs, tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "version 1" in proc.stdout and "e1" in proc.stdout and "e2" in proc.stdout
     assert "white object" in proc.stdout and "orange object" in proc.stdout
+
+
+def test_truncated_log_compiles_up_to_its_last_whole_chunk(sample_logs, tmp_path):
+    """A log cut short (killed recorder) is read up to its last whole chunk, with a warning."""
+    src = sample_logs["bench_pick"][0]
+    cut = tmp_path / "cut.mcap"
+    data = src.read_bytes()
+    cut.write_bytes(data[: int(len(data) * 0.97)])
+    warnings: list[str] = []
+    result = compile_logs([cut], tmp_path / "tree.json", on_warning=warnings.append)
+    assert any("cut.mcap" in w and "trunc" in w.lower() for w in warnings), warnings
+    assert len(result.tree.edges) >= 1
