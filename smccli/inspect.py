@@ -425,7 +425,7 @@ def branch_colours(tree: Tree) -> dict[str, tuple[int, int, int]]:
     """Edge id -> colour: a chain keeps its colour, each child of a fork starts a new one."""
     out: dict[str, tuple[int, int, int]] = {}
     k = 0
-    stack = [(ROOT, None)]
+    stack: list[tuple[str, tuple[int, int, int] | None]] = [(ROOT, None)]
     while stack:
         node, colour = stack.pop()
         kids = tree.children(node)
@@ -589,8 +589,8 @@ def decision_points(log: Any, tree: Tree) -> list[tuple[float, float, str]]:
     except Exception:  # segmentation is compile's business; marks are a fine fallback
         t0 = float(log.poi_t[0]) if len(log.poi_t) else 0.0
         bounds = [t0, *sorted(m.t for m in log.marks), t_end]
-        return [(a, b, f"fragment {k + 1}") for k, (a, b) in enumerate(zip(bounds, bounds[1:]))
-                if b > a]
+        pairs = zip(bounds[:-1], bounds[1:], strict=True)
+        return [(a, b, f"fragment {k + 1}") for k, (a, b) in enumerate(pairs) if b > a]
 
 
 def log_log(rec: Any, log: Any, tree: Tree, *, warn: Callable[[str], None] = lambda m: None,
@@ -605,17 +605,21 @@ def log_log(rec: Any, log: Any, tree: Tree, *, warn: Callable[[str], None] = lam
         rec.log("/world/poi/path", rr.LineStrips3D([log.poi[:, :3]], colors=[(240, 240, 240)],
                                                    radii=0.002, labels=[f"{name}: path taken"]),
                 static=True)
-        rec.send_columns("/world/poi", indexes=[tcol(TIMELINE, duration=log.poi_t)],
+        n = len(log.poi_t)
+        times = [tcol(TIMELINE, duration=log.poi_t)]
+        rec.send_columns("/world/poi", indexes=times,
                          columns=rr.Points3D.columns(positions=log.poi[:, :3],
-                                                     radii=np.full(len(log.poi_t), 0.01),
-                                                     colors=np.tile(_HIGHLIGHT, (len(log.poi_t), 1))))
+                                                     radii=np.full(n, 0.01),
+                                                     colors=np.tile(_HIGHLIGHT, (n, 1))))
         for i, axis in enumerate(("x", "y", "z", "yaw")):
-            rec.send_columns(f"/signals/poi/{axis}", indexes=[tcol(TIMELINE, duration=log.poi_t)],
+            rec.send_columns(f"/signals/poi/{axis}", indexes=times,
                              columns=rr.Scalars.columns(scalars=log.poi[:, i]))
-        if len(log.poi_t) > 1:
+        if n > 1:
             dt = np.diff(log.poi_t)
-            speed = np.linalg.norm(np.diff(log.poi[:, :3], axis=0), axis=1) / np.where(dt > 0, dt, np.inf)
-            rec.send_columns("/signals/poi/speed", indexes=[tcol(TIMELINE, duration=log.poi_t[1:])],
+            step = np.linalg.norm(np.diff(log.poi[:, :3], axis=0), axis=1)
+            speed = step / np.where(dt > 0, dt, np.inf)
+            rec.send_columns("/signals/poi/speed",
+                             indexes=[tcol(TIMELINE, duration=log.poi_t[1:])],
                              columns=rr.Scalars.columns(scalars=speed))
     if len(log.weight_t):
         rec.send_columns("/signals/weight", indexes=[tcol(TIMELINE, duration=log.weight_t)],
@@ -667,8 +671,8 @@ def _log_camera(rec: Any, log: Any) -> None:
         return rr.Transform3D(translation=f.T_world_camera[:3, 3], mat3x3=f.T_world_camera[:3, :3])
 
     rec.log("/world/camera", rr.Pinhole(image_from_camera=f0.K, resolution=[w, h],
-                                        camera_xyz=rr.ViewCoordinates.RDF, image_plane_distance=0.15),
-            static=True)
+                                        camera_xyz=rr.ViewCoordinates.RDF,
+                                        image_plane_distance=0.15), static=True)
     if not moving:
         rec.log("/world/camera", pose(f0), static=True)
     for f in log.frames:
@@ -757,8 +761,8 @@ def _log_perception(rec: Any, log: Any, tree: Tree, points: Sequence[tuple[float
             warn(f"{name}: perception failed at t={t0:.2f} s ({str(exc).splitlines()[0]})")
             continue
         rec.set_time(TIMELINE, duration=t0)
-        pts, cols = _subsample(pts, cols)
-        rec.log("/world/decisions/cloud", rr.Points3D(pts, colors=cols, radii=0.0015))
+        shown, shown_cols = _subsample(pts, cols)
+        rec.log("/world/decisions/cloud", rr.Points3D(shown, colors=shown_cols, radii=0.0015))
         if clusters:
             rec.log("/world/decisions/clusters", _boxes(
                 clusters, [_cluster_rgb(c, tree) for c in clusters],
