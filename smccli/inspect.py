@@ -788,3 +788,106 @@ def _log_perception(rec: Any, log: Any, tree: Tree, points: Sequence[tuple[float
                 [c], [_HIGHLIGHT], [f"salient: {_cluster_name(c, tree)} #{idx}"], 0.005))
             text = f"{label}: {len(clusters)} cluster(s), salient #{idx} {_cluster_name(c, tree)}"
         rec.log("/events/perception", rr.TextLog(text, level="DEBUG"))
+
+
+# --- headless previews (docs) -------------------------------------------------------------
+
+
+def save_previews(tree: Tree, log: Any | None, out_dir: Path) -> list[Path]:
+    """PNG renderings (matplotlib, no display) of the views the blueprint lays out, from the
+    same data as the recording: ``tree.png``, ``world.png`` and, with a log,
+    ``camera.png`` and ``signals.png``. For the docs; returns the files written."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from smccli.dmp import rollout
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    pos, colours = _layout(tree), branch_colours(tree)
+    fig, ax = plt.subplots(figsize=(9, 6))
+    for e in tree.edges:
+        (x0, y0), (x1, y1) = pos[e.parent], pos[e.child]
+        ax.annotate("", (x1, -y1), (x0, -y0), arrowprops={"arrowstyle": "->", "lw": 1.5,
+                                                          "color": "0.4"})
+        c = e.smc.perception.cluster
+        sw = _cluster_rgb(c, tree) if c is not None else colours[e.id]
+        mx, my = (x0 + x1) / 2, -(y0 + y1) / 2
+        ax.scatter([mx], [my], s=120, color=np.array(sw) / 255, edgecolors="k", zorder=3)
+        ax.text(mx + 12, my, edge_label(e, tree), fontsize=7, va="center")
+    for n in tree.nodes:
+        x, y = pos[n]
+        ax.scatter([x], [-y], s=260, color=np.array(_ROOT if n == ROOT else _NODE) / 255,
+                   zorder=4)
+        ax.text(x, -y + 22, n, ha="center", fontsize=9, weight="bold")
+    ax.set_title("/tree: decision points and SMCs")
+    ax.axis("off")
+    ax.margins(0.25, 0.15)
+    written.append(out_dir / "tree.png")
+    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+    fig = plt.figure(figsize=(8, 6))
+    ax3 = fig.add_subplot(projection="3d")
+    for e in tree.edges:
+        dmp = e.smc.action.dmp
+        _, path = rollout(dmp, start=dmp.start, goal=dmp.goal)
+        ax3.plot(*path[:, :3].T, color=np.array(colours[e.id]) / 255, lw=2, label=e.id)
+        ax3.scatter(*dmp.goal[:3], color=np.array(colours[e.id]) / 255, s=25)
+        c = e.smc.perception.cluster
+        if c is not None:
+            ax3.scatter(*c.centroid, color=np.array(_cluster_rgb(c, tree)) / 255, s=120,
+                        marker="s", edgecolors="k")
+    if log is not None and len(log.poi_t):
+        ax3.plot(*log.poi[:, :3].T, color="0.3", lw=1, ls="--", label="POI path taken")
+    ax3.set_xlabel("x [m]")
+    ax3.set_ylabel("y [m]")
+    ax3.set_zlabel("z [m]")
+    ax3.legend(fontsize=7, loc="upper left")
+    ax3.set_title("/world/actions/<edge> (coloured by branch) and /world/poi/path")
+    written.append(out_dir / "world.png")
+    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    if log is None:
+        return written
+
+    points = decision_points(log, tree)
+    if log.frames:
+        t0 = points[0][0] if points else log.frames[0].t
+        frame = _frame_at(log.frames, t0)
+        fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8))
+        a1.imshow(frame.rgb)
+        a1.set_title(f"/world/camera/image  t={frame.t:.2f} s")
+        d = np.where(np.isfinite(frame.depth) & (frame.depth > 0), frame.depth, np.nan)
+        im = a2.imshow(d, cmap="turbo")
+        fig.colorbar(im, ax=a2, label="depth [m]")
+        a2.set_title("/world/camera/depth")
+        for a in (a1, a2):
+            a.axis("off")
+        written.append(out_dir / "camera.png")
+        fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+        plt.close(fig)
+
+    fig, axes = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
+    for i, axis in enumerate(("x", "y", "z")):
+        axes[0].plot(log.poi_t, log.poi[:, i], label=f"/signals/poi/{axis}")
+    if log.commands:
+        axes[1].plot([c.t for c in log.commands], [c.gripper for c in log.commands],
+                     label="/signals/gripper")
+    if len(log.weight_t):
+        axes[1].plot(log.weight_t, log.weight, label="/signals/weight [kg]")
+    for a in axes:
+        for m in log.marks:
+            a.axvline(m.t, color="goldenrod", ls="--", lw=1)
+        for d in log.decisions:
+            a.axvline(float(d["t"]), color="purple", ls=":", lw=1)
+        a.legend(fontsize=7, loc="upper right")
+    axes[0].set_title("/signals (dashed: /events/saliency marks, dotted: decisions)")
+    axes[1].set_xlabel("time [s]")
+    written.append(out_dir / "signals.png")
+    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return written

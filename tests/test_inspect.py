@@ -411,3 +411,11 @@ def test_library_errors_are_typed(inputs, tmp_path):
     with pytest.raises(SmcError, match="exactly one"):
         inspect(inputs.tree, [], save=tmp_path / "x.rrd", serve=True)
     assert not (tmp_path / "x.rrd").exists()
+
+
+def test_previews_render_headless(inputs, tmp_path):
+    from smccli.inspect import save_previews
+
+    files = save_previews(load_tree(inputs.tree), read_log(inputs.demos[0]), tmp_path)
+    assert [f.name for f in files] == ["tree.png", "world.png", "camera.png", "signals.png"]
+    assert all(f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for f in files)
