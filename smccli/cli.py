@@ -185,7 +185,7 @@ def inspect(
     if not (spawn or serve) and save is None:
         save = tree.with_suffix(".rrd")
     ins.inspect(tree, logs or [], save=save, spawn=spawn, serve=serve, port=port,
-                console=out)
+                console=out, on_warning=lambda m: err.print(f"[yellow]warning:[/] {escape(m)}"))
 
 
 def main() -> None:

@@ -88,23 +88,29 @@ def _finger_speed(log: Log) -> tuple[np.ndarray, np.ndarray]:
     return t, vel
 
 
-def extract_chain(log: Log, params: SmcParams, mode: SegmentMode) -> Chain:
-    """Temporal, perception and action saliency of one log -> its SMC chain (eq. 40-42)."""
-    warnings: list[str] = []
-    name = log.path.name
+def fragments(log: Log, params: SmcParams,
+              mode: SegmentMode = SegmentMode.markers) -> list[Fragment]:
+    """Temporal saliency (3.1) of a log: its fragments, as compile cuts them."""
     t_end = float(log.poi_t[-1]) if len(log.poi_t) else 0.0
     t_f, v_f = _finger_speed(log)
     marks = tuple(m.t for m in log.marks if m.source == "operator")
     trace = trace_from_commands(log.commands, t_f, v_f, log.weight_t, log.weight, marks, t_end)
-    if mode is SegmentMode.markers and not marks:
+    return segment(trace, mode, snap_window=params.snap_window,
+                   min_fragment=params.min_fragment, auto_gap=params.auto_gap)
+
+
+def extract_chain(log: Log, params: SmcParams, mode: SegmentMode) -> Chain:
+    """Temporal, perception and action saliency of one log -> its SMC chain (eq. 40-42)."""
+    warnings: list[str] = []
+    name = log.path.name
+    if mode is SegmentMode.markers and not any(m.source == "operator" for m in log.marks):
         warnings.append(f"{name}: no saliency marks; the whole log is one fragment "
                         "(try --segment auto)")
-    fragments = segment(trace, mode, snap_window=params.snap_window,
-                        min_fragment=params.min_fragment, auto_gap=params.auto_gap)
+    frags = fragments(log, params, mode)
     robot = RobotModel.from_log(log)
     has_scale = len(log.weight) > 0
     smcs: list[Smc] = []
-    for k, frag in enumerate(fragments):
+    for k, frag in enumerate(frags):
         frame = _frame_at(log.frames, frag.t0)
         if frame is None:
             raise LogError(f"{name}: no camera frame near t={frag.t0:.2f} s")
@@ -125,7 +131,7 @@ def extract_chain(log: Log, params: SmcParams, mode: SegmentMode) -> Chain:
                             "is stored in the world frame")
         smcs.append(Smc(perception=SalientPerceptions(cluster=cluster, weight=weight),
                         action=action))
-    return Chain(log=log.path, sha256=log.sha256, fragments=tuple(fragments),
+    return Chain(log=log.path, sha256=log.sha256, fragments=tuple(frags),
                  smcs=tuple(smcs), warnings=tuple(warnings))
 
 

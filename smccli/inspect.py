@@ -23,7 +23,6 @@ rerun-sdk (the Python API binds every interface; the binary takes ``--bind``).
 
 from __future__ import annotations
 
-import colorsys
 import math
 import os
 import shutil
@@ -41,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from smccli.colours import colour_name, dominant_rgb
 from smccli.errors import LogError, SmcError
 from smccli.tree import ROOT, Edge, Tree, load_tree
 
@@ -345,54 +345,13 @@ def blueprint() -> Any:
 # --- colours and labels -----------------------------------------------------------------
 
 
-def dominant_rgb(histogram: np.ndarray, hue_bins: int = 12, sat_bins: int = 3,
-                 val_bins: int = 3) -> tuple[int, int, int]:
-    """RGB of a cluster histogram's heaviest bin (layout: :mod:`smccli.perception.histogram`).
-
-    Chromatic bins [hue x saturation] come first, then the achromatic brightness bins.
-    """
-    h = np.asarray(histogram, dtype=float)
-    n_c = hue_bins * sat_bins
-    if h.shape != (n_c + val_bins,) or not h.sum() > 0:
-        return (160, 160, 160)
-    if h[:n_c].sum() >= h[n_c:].sum():
-        hs = h[:n_c].reshape(hue_bins, sat_bins)
-        hue = (int(np.argmax(hs.sum(axis=1))) + 0.5) / hue_bins
-        row = hs[int(np.argmax(hs.sum(axis=1)))]
-        sat = (float(np.dot(row, np.arange(sat_bins) + 0.5)) / max(row.sum(), 1e-12)) / sat_bins
-        r, g, b = colorsys.hsv_to_rgb(hue, max(sat, 0.45), 0.9)
-    else:
-        v = (int(np.argmax(h[n_c:])) + 0.5) / val_bins
-        r = g = b = 0.25 + 0.7 * v
-    return (int(255 * r), int(255 * g), int(255 * b))
-
-
-def colour_name(rgb: tuple[int, int, int]) -> str:
-    """A plain colour word for ``rgb``: red, orange, yellow, green, cyan, blue, purple,
-    pink, or white / grey / black for achromatic colours."""
-    h, s, v = colorsys.rgb_to_hsv(*(c / 255 for c in rgb))
-    if s < 0.25:
-        return "white" if v > 0.75 else "grey" if v > 0.3 else "black"
-    deg = h * 360
-    for limit, name in ((15, "red"), (45, "orange"), (70, "yellow"), (165, "green"),
-                        (195, "cyan"), (255, "blue"), (290, "purple"), (340, "pink")):
-        if deg < limit:
-            return name
-    return "red"
-
-
 def _cluster_rgb(cluster: Any, tree: Tree) -> tuple[int, int, int]:
     p = tree.params.perception
     return dominant_rgb(cluster.histogram, p.hue_bins, p.sat_bins, p.val_bins)
 
 
 def _cluster_name(cluster: Any, tree: Tree) -> str:
-    try:  # the perception module's own naming, when it has one
-        from smccli.perception import cluster_colour_name  # type: ignore[attr-defined]
-
-        return str(cluster_colour_name(cluster))
-    except ImportError:
-        return colour_name(_cluster_rgb(cluster, tree))
+    return colour_name(_cluster_rgb(cluster, tree))
 
 
 def _sources_text(edge: Edge, limit: int = 3) -> str:
@@ -571,22 +530,12 @@ def decision_points(log: Any, tree: Tree) -> list[tuple[float, float, str]]:
         return [(t, ts[k + 1] if k + 1 < len(ts) else t_end, f"decision at {d.get('node')}")
                 for k, (t, d) in enumerate(zip(ts, log.decisions, strict=True))]
     try:
-        from smccli.segmentation import SegmentMode, segment, trace_from_commands
+        from smccli.compile import fragments
 
-        marks = tuple(m.t for m in log.marks if m.source == "operator")
-        names = log.joint_states[0].names if log.joint_states else ()
-        idx = [i for i, n in enumerate(names) if "finger" in n]
-        t_f = np.array([js.t for js in log.joint_states], dtype=float)
-        v_f = (np.array([np.abs(js.velocity[idx]).max() for js in log.joint_states])
-               if idx else np.zeros(len(t_f)))
-        trace = trace_from_commands(log.commands, t_f, v_f, log.weight_t, log.weight, marks,
-                                    t_end)
-        p = tree.params
-        frags = segment(trace, SegmentMode.markers, snap_window=p.snap_window,
-                        min_fragment=p.min_fragment, auto_gap=p.auto_gap)
+        frags = fragments(log, tree.params)
         return [(f.t0, f.t1, f"fragment {k + 1} (ends: {f.cause})")
                 for k, f in enumerate(frags)]
-    except Exception:  # segmentation is compile's business; marks are a fine fallback
+    except Exception:  # a log compile would refuse still shows, cut at its marks
         t0 = float(log.poi_t[0]) if len(log.poi_t) else 0.0
         bounds = [t0, *sorted(m.t for m in log.marks), t_end]
         pairs = zip(bounds[:-1], bounds[1:], strict=True)
