@@ -51,6 +51,8 @@ sample-logs: setup
 	$(PY) -m smccli.sample_logs
 
 bench: setup
+	$(PY) -m smccli.bench_record
+	$(PY) -m smccli.bench_compile
 	$(PY) -m smccli.bench
 
 lint: setup
