@@ -1,0 +1,820 @@
+"""``smc replay``: execute an SMC tree autonomously in simulation (paper 3.6, 3.9, Algorithm 2).
+
+At each decision point the robot perceives through its sensors only (the rendered RGB-D
+camera, the scale, its own joints for the self-filter), with the very code compile uses;
+among the children of the current node it takes the SMC with the least D_P that satisfies
+C_Now (eq. 36, 45); maps its action to the context (eq. 38-39, 46): start = the current POI,
+goal = the matched cluster's location and yaw plus the stored offset (or the stored absolute
+goal); rolls the DMP out, streams it through the same Cartesian controller as teleop, holds
+the goal until the POI arrives, applies the gripper event and waits for the fingers to stop,
+then moves to the child node. At a leaf the scene settles and the scene's success criterion
+scores the episode.
+
+Honesty (DESIGN.md section 2): the decision loop only sees a :class:`Sensors` facade
+(camera, scale, POI, joints, gripper, step). Object poses are read by the evaluation only,
+after control has finished (:func:`classify_failure`, ``Sim.success``).
+
+Branches that differ only by their demonstrated path shape (same salient perception, same
+gripper event, same goal in the object's frame) lead to equivalent decision points; replay
+keeps them all as its frontier and chooses among the union of their children (see
+docs/replay.md, "frontier").
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from smccli.contingency import d_p as d_p_stored
+from smccli.controller import reachable, wrap
+from smccli.dmp import rollout
+from smccli.errors import OutputExistsError, SceneError, SmcError, TreeError
+from smccli.params import SmcParams
+from smccli.perception import Cluster, clusters_from_frame
+from smccli.perception.cloud import object_points
+from smccli.robot_model import RobotModel
+from smccli.scene import Layout, Scene, builtin_names, load_scene, sample_layout
+from smccli.sensors import CameraFrame, JointState, PoiCommand
+from smccli.sim import Sim
+from smccli.smc import Action, goal_from_object
+from smccli.tree import ROOT, Edge, Tree, load_tree
+
+OUTCOMES = ("success", "no_contingent_smc", "target_unreachable", "timeout",
+            "grasp_missed", "object_dropped", "placed_outside")
+"""Episode outcomes: success, the three control stops, then the failure causes found at
+evaluation time from the trace and the final state."""
+
+ARRIVAL_TOLERANCE = 0.005
+"""The hold after a rollout ends once the POI is this close to the goal [m] (as the
+scripted operator's moves)."""
+MAX_HOLD = 1.5
+"""Longest hold of the goal after a rollout [s]."""
+DURATION_CLIP = (0.5, 2.5)
+"""Bounds of the duration scale (new start-goal distance over the demonstrated one)."""
+MAX_YAW_RATE = 1.5
+"""A rollout lasts at least |yaw change| / this [s] (the wrist's comfortable speed) [rad/s]."""
+MIN_DURATION = 0.5
+"""Shortest rollout [s]."""
+FINAL_SETTLE = 1.0
+"""Sim time the scene settles at a leaf before scoring [s]."""
+WEIGHT_WINDOW = 0.15
+"""The scale is read as the median over this window at a decision point [s] (as compile)."""
+EMPTY_GRIP = 0.08
+"""A closed gripper whose opening is below this holds nothing [fraction of full opening]."""
+
+
+# --- the robot's view of the world ---------------------------------------------------------
+
+
+class Sensors:
+    """What control may use: the robot's sensors and its command input, nothing else.
+
+    A facade over :class:`Sim` without ground truth or object state; ``on_step`` (the
+    replay log) observes each control period.
+    """
+
+    def __init__(self, sim: Sim, on_step: Callable[[PoiCommand], None] | None = None) -> None:
+        self._sim = sim
+        self._on_step = on_step
+        self.model = sim.model
+        """The robot's kinematic model (for reachability; no object state is read)."""
+        self.control_period = sim.control_period
+        self.has_scale = sim.scene.scale is not None
+
+    @property
+    def t(self) -> float:
+        """Simulation time [s]."""
+        return self._sim.t
+
+    def step(self, cmd: PoiCommand) -> None:
+        """Send one command and advance one control period."""
+        self._sim.step(cmd)
+        if self._on_step is not None:
+            self._on_step(cmd)
+
+    def poi(self) -> np.ndarray:
+        return self._sim.poi()
+
+    def gripper_opening(self) -> float:
+        return self._sim.gripper_opening()
+
+    def gripper_speed(self) -> float:
+        return self._sim.gripper_speed()
+
+    def joint_state(self) -> JointState:
+        return self._sim.joint_state()
+
+    def weight(self) -> float | None:
+        return self._sim.weight()
+
+    def render_camera(self) -> CameraFrame:
+        return self._sim.render_camera()
+
+
+# --- matching (eq. 36, 39, 45), vectorised over the candidate edges ------------------------
+
+
+_BC_MIN = 1e-6
+_MIN_EXTENT = 1e-3
+
+
+@dataclass(frozen=True)
+class EdgeStack:
+    """The stored salient perceptions of a set of edges, stacked for fast matching."""
+
+    edges: tuple[Edge, ...]
+    has_cluster: np.ndarray
+    """(E,) bool: the SMC has a localized (cluster) perception."""
+    sqrt_hist: np.ndarray
+    """(E, H): square root of each stored normalised histogram (zeros without a cluster)."""
+    log_ext: np.ndarray
+    """(E, 3): log of the stored extents, floored at 1 mm."""
+    has_weight: np.ndarray
+    """(E,) bool: the SMC has a scale reading."""
+    weight: np.ndarray
+    """(E,): stored weight [kg] (0 without)."""
+
+    @classmethod
+    def build(cls, edges: Sequence[Edge]) -> EdgeStack:
+        edges = tuple(edges)
+        clusters = [e.smc.perception.cluster for e in edges]
+        size = next((len(c.histogram) for c in clusters if c is not None), 1)
+        hist = np.zeros((len(edges), size))
+        ext = np.zeros((len(edges), 3))
+        for i, c in enumerate(clusters):
+            if c is not None:
+                h = np.asarray(c.histogram, dtype=np.float64)
+                hist[i] = np.sqrt(h / max(float(h.sum()), 1e-300))
+                ext[i] = np.log(np.maximum(np.asarray(c.extents, dtype=np.float64), _MIN_EXTENT))
+        weights = [e.smc.perception.weight for e in edges]
+        return cls(
+            edges=edges,
+            has_cluster=np.array([c is not None for c in clusters], dtype=bool),
+            sqrt_hist=hist,
+            log_ext=ext,
+            has_weight=np.array([w is not None for w in weights], dtype=bool),
+            weight=np.array([0.0 if w is None else float(w) for w in weights]),
+        )
+
+
+def match_edges(stack: EdgeStack, clusters: Sequence[Cluster], weight: float | None,
+                params: SmcParams) -> tuple[np.ndarray, np.ndarray]:
+    """C_Now of the context against every stacked edge at once (eq. 36, 39).
+
+    Returns (d_p (E,), cluster index (E,) int, -1 when the SMC has no cluster). Same values
+    as :func:`smccli.contingency.match_context` edge by edge (tested), in one matrix product.
+    """
+    n = len(stack.edges)
+    d = np.zeros(n)
+    idx = np.full(n, -1, dtype=np.int64)
+    if stack.has_cluster.any():
+        if clusters:
+            pp = params.perception
+            hc = np.array([c.histogram for c in clusters], dtype=np.float64)
+            hc = np.sqrt(hc / np.maximum(hc.sum(axis=1, keepdims=True), 1e-300))
+            bc = stack.sqrt_hist @ hc.T  # (E, C) Bhattacharyya coefficients
+            d_h = np.where(bc > 1.0 - 1e-12, 0.0, -np.log(np.maximum(bc, _BC_MIN)))
+            ec = np.log(np.maximum(np.array([c.extents for c in clusters], dtype=np.float64),
+                                   _MIN_EXTENT))
+            d_e = np.abs(stack.log_ext[:, None, :] - ec[None, :, :]).max(axis=2)
+            dc = d_h / pp.hist_scale + d_e / pp.extent_scale
+            best = np.argmin(dc, axis=1)
+            d = np.where(stack.has_cluster, dc[np.arange(n), best], 0.0)
+            idx = np.where(stack.has_cluster, best, -1)
+        else:
+            d = np.where(stack.has_cluster, np.inf, 0.0)
+    if stack.has_weight.any():
+        if weight is None:
+            d = np.where(stack.has_weight, np.inf, d)
+        else:
+            d = d + np.where(stack.has_weight,
+                             np.abs(weight - stack.weight) / params.weight_scale, 0.0)
+    return d, idx
+
+
+# --- results ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Candidate:
+    """One child SMC considered at a decision point."""
+
+    edge: str
+    """Edge id."""
+    node: str
+    """Node it leaves."""
+    d_p: float
+    """D_P between the context and the SMC's salient perceptions (inf: not comparable)."""
+    contingent: bool
+    """C_Now: d_p < T_hP (eq. 36)."""
+    cluster_index: int | None
+    """Context cluster matched to the SMC's localized perception (eq. 39), if any."""
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    """One decision point of Algorithm 2."""
+
+    t: float
+    """Simulation time of the decision [s]."""
+    nodes: tuple[str, ...]
+    """The frontier: the current node and the nodes equivalent to it."""
+    candidates: tuple[Candidate, ...]
+    """Every child of the frontier with its distances."""
+    chosen: str | None
+    """Edge taken (least contingent D_P, eq. 45), None when none was contingent."""
+    mapped_goal: np.ndarray | None
+    """Goal of the chosen action in the world [x, y, z, yaw] (eq. 38-39, 46)."""
+    n_clusters: int
+    """Object clusters seen."""
+    weight: float | None
+    """Scale reading [kg], None without a scale."""
+    perceive_s: float
+    """Wall time to render and extract the clusters [s]."""
+    match_s: float
+    """Wall time to match the candidates [s]."""
+    duration: float = 0.0
+    """Rollout duration of the chosen action [s]."""
+
+    @property
+    def latency_s(self) -> float:
+        """Decision latency: perceive + match [s]."""
+        return self.perceive_s + self.match_s
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``/smc/decision`` message (schemas/smc_decision.schema.json)."""
+        return {
+            "node": self.nodes[0],
+            "nodes": list(self.nodes),
+            "candidates": [{"edge": c.edge, "node": c.node, "d_p": _num(c.d_p),
+                            "contingent": c.contingent, "cluster": c.cluster_index}
+                           for c in self.candidates],
+            "chosen": self.chosen,
+            "mapped_goal": None if self.mapped_goal is None else
+            [float(v) for v in self.mapped_goal],
+            "n_clusters": self.n_clusters,
+            "weight": self.weight,
+            "duration": self.duration,
+            "timings": {"perceive": self.perceive_s, "match": self.match_s,
+                        "total": self.latency_s},
+        }
+
+
+@dataclass(frozen=True, slots=True)
+class ActionTrace:
+    """What happened while one chosen action ran (sensor readings only)."""
+
+    edge: str
+    event: str
+    """Gripper event: close, open or none."""
+    t0: float
+    """Start [s]."""
+    t1: float
+    """End, after the gripper settled [s]."""
+    opening_before: float
+    """Gripper opening when the action started [0-1]."""
+    opening_after: float
+    """Gripper opening after the event settled [0-1]."""
+    arrived: bool
+    """The POI reached the goal within the tolerance before the hold ran out."""
+
+
+@dataclass(frozen=True, slots=True)
+class EpisodeResult:
+    """Outcome and trace of one replay episode."""
+
+    outcome: str
+    """One of :data:`OUTCOMES`."""
+    success: bool
+    """The scene's success criterion at the end."""
+    reason: str
+    """Why: the success criterion's text, or what stopped control."""
+    decisions: tuple[Decision, ...]
+    actions: tuple[ActionTrace, ...]
+    path: tuple[str, ...]
+    """Edge ids taken."""
+    layout: Layout
+    """Object poses at the start."""
+    duration: float
+    """Sim time of the task: first decision to the last action's end [s]."""
+    demo_duration: float
+    """Sum of the source fragment durations of the path taken (mean per edge) [s]."""
+    wall_time: float
+    """Wall time of the episode [s]."""
+    manipulated: str | None = None
+    """The object the task moves (from the success criterion), for distance bands."""
+    final_poses: dict[str, list[float]] = field(default_factory=dict)
+    """Object [x, y, z, yaw] at the end (evaluation)."""
+    output: Path | None = None
+    """The replay log written, if any."""
+
+    @property
+    def latencies_ms(self) -> list[float]:
+        return [1e3 * d.latency_s for d in self.decisions]
+
+    def to_report(self) -> dict[str, Any]:
+        """The JSON report of ``--report``."""
+        lat = self.latencies_ms
+        return {
+            "outcome": self.outcome,
+            "success": self.success,
+            "reason": self.reason,
+            "path": list(self.path),
+            "layout": {k: list(v) for k, v in self.layout.items()},
+            "final_poses": self.final_poses,
+            "decisions": [d.to_json() for d in self.decisions],
+            "latency_ms": {"per_decision": lat,
+                           "p50": float(np.median(lat)) if lat else None,
+                           "max": max(lat) if lat else None},
+            "duration_s": self.duration,
+            "demo_duration_s": self.demo_duration,
+            "duration_ratio": self.duration / self.demo_duration if self.demo_duration else None,
+            "wall_time_s": self.wall_time,
+            "output": None if self.output is None else str(self.output),
+        }
+
+
+def _num(x: float) -> float | None:
+    return None if not math.isfinite(x) else float(x)
+
+
+# --- the tree and scene ----------------------------------------------------------------
+
+
+def resolve(tree_path: Path | Tree, scene: str | Path | Scene | None) -> tuple[Tree, Scene]:
+    """Load the tree and the scene it runs in; refuse a scene other than the tree's."""
+    tree = tree_path if isinstance(tree_path, Tree) else load_tree(Path(tree_path))
+    where = "tree" if isinstance(tree_path, Tree) else str(tree_path)
+    if not tree.edges:
+        raise TreeError(f"{where}: the tree holds no SMC (compile a demonstration first)")
+    tree_scene = str(tree.scene.get("name", "")) if tree.scene else ""
+    if scene is None:
+        if tree_scene not in builtin_names():
+            raise SceneError(f"{where}: built for scene {tree_scene!r}, which is not built in; "
+                             "pass --scene PATH")
+        sc = load_scene(tree_scene)
+    else:
+        sc = scene if isinstance(scene, Scene) else load_scene(scene)
+    if tree_scene and sc.name != tree_scene:
+        raise TreeError(f"{where}: built for scene {tree_scene!r}, not {sc.name!r}")
+    return tree, sc
+
+
+def layout_for(scene: Scene, seed: int, trial: int = 0) -> Layout:
+    """The layout of trial ``trial`` of a campaign with ``seed`` (an episode is trial 0)."""
+    return sample_layout(scene, np.random.default_rng([seed, trial]))
+
+
+def read_layout(path: Path, scene: Scene) -> Layout:
+    """A layout file: YAML or JSON mapping object -> [x, y, z, yaw]; z may be omitted."""
+    import yaml
+
+    try:
+        raw = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise SceneError(f"{path}: cannot read layout ({exc.__class__.__name__})") from None
+    if not isinstance(raw, dict):
+        raise SceneError(f"{path}: expected a mapping object -> [x, y, z, yaw]")
+    layout: Layout = {}
+    for name, v in raw.items():
+        obj = scene.object(str(name))
+        try:
+            vals = [float(x) for x in v]
+        except (TypeError, ValueError):
+            vals = []
+        if len(vals) == 3:
+            vals = [vals[0], vals[1], obj.pose[2], vals[2]]
+        if len(vals) != 4:
+            raise SceneError(f"{path}: {name}: expected [x, y, z, yaw] or [x, y, yaw], found {v!r}")
+        layout[obj.name] = (vals[0], vals[1], vals[2], vals[3])
+    return layout
+
+
+def equivalent(a: Edge, b: Edge, params: SmcParams) -> bool:
+    """Two sibling SMCs that differ at most by their path shape: same salient perceptions
+    (D_P < T_hP), gripper event and goal frame, goals within T_hA (position, plus
+    ``yaw_scale`` per radian of yaw modulo pi)."""
+    pa, pb = a.smc.action, b.smc.action
+    if pa.event != pb.event or pa.goal_frame != pb.goal_frame:
+        return False
+    gap = float(np.linalg.norm(pa.goal[:3] - pb.goal[:3]))
+    dyaw = abs(math.remainder(float(pa.goal[3] - pb.goal[3]), math.pi))
+    if gap + params.yaw_scale * dyaw >= params.t_ha:
+        return False
+    return d_p_stored(a.smc.perception, b.smc.perception, params) < params.t_hp
+
+
+# --- Algorithm 2 ----------------------------------------------------------------------
+
+
+class Controller:
+    """The SMC-aware control of Algorithm 2 over a :class:`Sensors` facade."""
+
+    def __init__(self, tree: Tree, scene: Scene, sensors: Sensors,
+                 on_decision: Callable[[Decision, CameraFrame, np.ndarray], None] | None = None,
+                 max_time: float = 120.0) -> None:
+        self.tree = tree
+        self.params = tree.params
+        self.sensors = sensors
+        js = sensors.joint_state()
+        self.robot = RobotModel.from_mjcf(scene.mjcf, tuple(js.names))
+        self.on_decision = on_decision
+        self.max_time = max_time
+        self._stacks: dict[tuple[str, ...], EdgeStack] = {}
+        self._last_cmd = PoiCommand(sensors.t, sensors.poi(), 1.0)
+        self._edge_weights: list[float | None] = []
+
+    # perception at a decision point: the same pipeline and instants as compile
+    def perceive(self) -> tuple[CameraFrame, tuple[Cluster, ...], float | None, float]:
+        t0 = time.perf_counter()
+        frame = self.sensors.render_camera()
+        geom = self.robot.geometry_for(self.sensors.joint_state().position)
+        clusters = clusters_from_frame(frame, geom, self.params.perception)
+        elapsed = time.perf_counter() - t0
+        weight = None
+        if self.sensors.has_scale:
+            # Compile reads the scale over [t0, t0 + 0.15 s] from the fragment's start, which
+            # is the previous gripper event's command edge: take the readings recorded there,
+            # else (first decision, no gripper event) read them now while holding still.
+            readings = self._edge_weights
+            if not readings:
+                readings = [self.sensors.weight()]
+                for _ in range(round(WEIGHT_WINDOW / self.sensors.control_period)):
+                    self._hold()
+                    readings.append(self.sensors.weight())
+            self._edge_weights = []
+            weight = float(np.median([w for w in readings if w is not None]))
+        return frame, clusters, weight, elapsed
+
+    def stack(self, nodes: tuple[str, ...]) -> EdgeStack:
+        if nodes not in self._stacks:
+            edges = [e for n in nodes for e in self.tree.children(n)]
+            self._stacks[nodes] = EdgeStack.build(edges)
+        return self._stacks[nodes]
+
+    def decide(self, nodes: tuple[str, ...]) -> tuple[Decision, Edge | None, Cluster | None,
+                                                      CameraFrame]:
+        t = self.sensors.t
+        frame, clusters, weight, perceive_s = self.perceive()
+        t0 = time.perf_counter()
+        stack = self.stack(nodes)
+        d, idx = match_edges(stack, clusters, weight, self.params)
+        ok = d < self.params.t_hp
+        chosen = int(np.argmin(np.where(ok, d, np.inf))) if ok.any() else None
+        match_s = time.perf_counter() - t0
+        cands = tuple(Candidate(e.id, e.parent, float(d[i]), bool(ok[i]),
+                                None if idx[i] < 0 else int(idx[i]))
+                      for i, e in enumerate(stack.edges))
+        edge = None if chosen is None else stack.edges[chosen]
+        cluster = None if edge is None or idx[chosen] < 0 else clusters[int(idx[chosen])]
+        dec = Decision(t=t, nodes=nodes, candidates=cands,
+                       chosen=None if edge is None else edge.id, mapped_goal=None,
+                       n_clusters=len(clusters), weight=weight, perceive_s=perceive_s,
+                       match_s=match_s)
+        return dec, edge, cluster, frame
+
+    def map_goal(self, action: Action, cluster: Cluster | None, start: np.ndarray) -> np.ndarray:
+        """Contingent action mapping of the goal (eq. 38-39, 46)."""
+        if action.goal_frame == "object" and cluster is not None:
+            goal = goal_from_object(action.goal, cluster, near_yaw=float(start[3]))
+        else:
+            goal = np.array(action.goal, dtype=float)
+            # A parallel gripper is symmetric under a half turn: turn the short way.
+            goal[3] = start[3] + math.remainder(float(goal[3] - start[3]), math.pi)
+        goal[3] = start[3] + wrap(float(goal[3] - start[3]))
+        return goal
+
+    def duration(self, action: Action, start: np.ndarray, goal: np.ndarray) -> float:
+        """The demonstrated duration scaled by the start-goal distance, so speeds stay human."""
+        dmp = action.dmp
+        demo = float(np.linalg.norm(dmp.goal[:3] - dmp.start[:3]))
+        new = float(np.linalg.norm(goal[:3] - start[:3]))
+        scale = float(np.clip(new / max(demo, 1e-3), *DURATION_CLIP))
+        return max(MIN_DURATION, dmp.duration * scale, abs(goal[3] - start[3]) / MAX_YAW_RATE)
+
+    def _hold(self) -> None:
+        c = self._last_cmd
+        self._send(PoiCommand(self.sensors.t, c.target, c.gripper))
+
+    def _send(self, cmd: PoiCommand) -> None:
+        self._last_cmd = cmd
+        self.sensors.step(cmd)
+
+    def execute(self, edge: Edge, start: np.ndarray, goal: np.ndarray,
+                duration: float) -> ActionTrace:
+        """Stream the rollout, hold the goal until the POI arrives, then the gripper event."""
+        a = edge.smc.action
+        s = self.sensors
+        t0 = s.t
+        opening0 = s.gripper_opening()
+        grip = 1.0 if a.gripper_start >= 0.5 else 0.0
+        _, path = rollout(a.dmp, start=start, goal=goal, duration=duration,
+                          n_steps=max(2, round(duration / s.control_period)) + 1)
+        for y in path[1:]:
+            self._send(PoiCommand(s.t, y, grip))
+        arrived = False
+        for _ in range(round(MAX_HOLD / s.control_period)):
+            if np.linalg.norm(s.poi()[:3] - goal[:3]) < ARRIVAL_TOLERANCE:
+                arrived = True
+                break
+            self._send(PoiCommand(s.t, goal, grip))
+        if a.event != "none":
+            end = 1.0 if a.gripper_end >= 0.5 else 0.0
+            still, t_ev = 0, s.t
+            self._edge_weights = [s.weight()] if s.has_scale else []
+            while True:
+                self._send(PoiCommand(s.t, goal, end))
+                if s.has_scale and s.t - t_ev <= WEIGHT_WINDOW + 1e-9:
+                    self._edge_weights.append(s.weight())
+                moving = abs(s.gripper_speed()) > 0.02
+                still = 0 if moving else still + 1
+                el = s.t - t_ev
+                if (el > 0.15 and still >= 10) or el > 3.0:
+                    break
+        return ActionTrace(edge=edge.id, event=a.event, t0=t0, t1=s.t, opening_before=opening0,
+                           opening_after=s.gripper_opening(), arrived=arrived)
+
+    def run(self) -> tuple[str, str, list[Decision], list[ActionTrace], list[Edge]]:
+        """Algorithm 2 from the root to a leaf: (outcome, reason, decisions, actions, path)."""
+        nodes: tuple[str, ...] = (ROOT,)
+        decisions: list[Decision] = []
+        actions: list[ActionTrace] = []
+        path: list[Edge] = []
+        t_start = self.sensors.t
+        while True:
+            if not any(self.tree.children(n) for n in nodes):
+                return "success", "leaf reached", decisions, actions, path
+            if self.sensors.t - t_start > self.max_time:
+                return "timeout", f"no leaf after {self.max_time:.0f} s", decisions, actions, path
+            dec, edge, cluster, frame = self.decide(nodes)
+            if edge is None:
+                decisions.append(dec)
+                if self.on_decision:
+                    self.on_decision(dec, frame, np.zeros((0, 3)))
+                best = ", ".join(f"{c.edge} d_p={c.d_p:.3f}" for c in
+                                 sorted(dec.candidates, key=lambda c: c.d_p))
+                return ("no_contingent_smc",
+                        f"no contingent SMC at node {nodes[0]} (T_hP={self.params.t_hp}): {best}",
+                        decisions, actions, path)
+            start = self.sensors.poi()
+            goal = self.map_goal(edge.smc.action, cluster, start)
+            duration = self.duration(edge.smc.action, start, goal)
+            dec = Decision(**{**_fields(dec), "mapped_goal": goal, "duration": duration})
+            decisions.append(dec)
+            if self.on_decision:
+                self.on_decision(dec, frame, start)
+            if not reachable(self.sensors.model, goal):
+                return ("target_unreachable",
+                        f"edge {edge.id}: goal [{goal[0]:.3f}, {goal[1]:.3f}, {goal[2]:.3f}] m, "
+                        f"yaw {goal[3]:.2f} rad is out of reach", decisions, actions, path)
+            actions.append(self.execute(edge, start, goal, duration))
+            path.append(edge)
+            siblings = self.stack(nodes).edges
+            nodes = tuple(e.child for e in siblings
+                          if e is edge or equivalent(e, edge, self.params))
+
+
+def _fields(obj: Any) -> dict[str, Any]:
+    return {f: getattr(obj, f) for f in obj.__slots__}
+
+
+# --- evaluation (after control; may read the simulator) --------------------------------
+
+
+def manipulated_object(scene: Scene, layout: Layout, final: dict[str, list[float]]) -> str | None:
+    """The object the task moves: of the success criteria's objects, the one that moved
+    most (the first one when none moved)."""
+    names = [c.object for crit in scene.success for c in crit.any_of if c.object in layout]
+    if not names:
+        return None
+    moved = [(math.dist(layout[n][:2], final[n][:2]) if n in final else 0.0, -i, n)
+             for i, n in enumerate(names)]
+    best = max(moved)
+    return best[2] if best[0] > 0.02 else names[0]
+
+
+def classify_failure(scene: Scene, layout: Layout, final: dict[str, list[float]],
+                     actions: Sequence[ActionTrace], obj: str | None) -> str:
+    """Why an episode that reached a leaf failed: grasp_missed, object_dropped, placed_outside.
+
+    From the trace (gripper openings after close events, before open events) and the final
+    poses: fingers closed on nothing or the object never left its place -> grasp_missed;
+    fingers closed on nothing later, or the object ended far from any target ->
+    object_dropped; else placed_outside.
+    """
+    closes = [a for a in actions if a.event == "close"]
+    if any(a.opening_after < EMPTY_GRIP for a in closes[:1]):
+        return "grasp_missed"
+    if obj is None:
+        return "placed_outside"
+    if math.dist(layout[obj][:2], final[obj][:2]) < 0.02:
+        return "grasp_missed"
+    opens = [a for a in actions if a.event == "open"]
+    if any(a.opening_before < EMPTY_GRIP for a in opens):
+        return "object_dropped"
+    targets = [c.target for crit in scene.success for c in crit.any_of if c.object == obj]
+    near = min((math.dist(final[obj][:2], final[t][:2]) - scene.object(t).footprint_radius
+                for t in targets if t in final), default=0.0)
+    return "object_dropped" if near > 0.05 else "placed_outside"
+
+
+# --- the replay log ----------------------------------------------------------------------
+
+
+class _ReplayLog:
+    """Writes the recorder's topics plus /smc/decision and /perception/points."""
+
+    def __init__(self, path: Path, scene: Scene, sim: Sim, tree: Tree, seed: int,
+                 layout: Layout, force: bool) -> None:
+        from smccli import __version__
+        from smccli.logs import LogWriter
+        from smccli.record import scene_attachments
+
+        meta = {"scene": scene.name, "scene_digest": scene.digest, "smc_version": __version__,
+                "seed": str(seed), "operator": "replay", "control_rate_hz": "100",
+                "state_rate_hz": "100", "camera_rate_hz": f"{scene.camera.rate:g}",
+                "has_scale": "true" if scene.scale else "false",
+                "tree_digest": _tree_digest(tree), "layout": json.dumps(layout)}
+        self.writer = LogWriter(path, metadata=meta, attachments=scene_attachments(scene),
+                                force=force)
+        self.sim = sim
+        self.scene = scene
+        self.params = tree.params
+        self.robot: RobotModel | None = None
+        self.cam_period = 1.0 / scene.camera.rate
+        self.gt_period = 0.1
+        self.next_cam = self.next_gt = sim.t
+        self._state()
+
+    def _state(self) -> None:
+        sim, w = self.sim, self.writer
+        t = sim.t
+        if t >= self.next_cam - 1e-9:
+            w.write_camera(sim.render_camera())
+            self.next_cam += self.cam_period
+        if t >= self.next_gt - 1e-9:
+            w.write_ground_truth(t, sim.ground_truth())  # evaluation topic, not read by control
+            self.next_gt += self.gt_period
+        w.write_joint_state(sim.joint_state())
+        w.write_poi(t, sim.poi())
+        kg = sim.weight()
+        if kg is not None:
+            w.write_weight(t, kg)
+
+    def on_step(self, cmd: PoiCommand) -> None:
+        self.writer.write_command(cmd)
+        self._state()
+
+    def on_decision(self, dec: Decision, frame: CameraFrame, _start: np.ndarray) -> None:
+        if self.robot is None:
+            self.robot = RobotModel.from_mjcf(self.scene.mjcf, tuple(self.sim.joint_state().names))
+        geom = self.robot.geometry_for(self.sim.joint_state().position)
+        pts, cols, _ = object_points(frame, geom, self.params.perception)
+        self.writer.write_point_cloud(dec.t, pts, cols)
+        self.writer.write_json("/smc/decision", dec.t, dec.to_json())
+
+    def close(self) -> None:
+        self.writer.close()
+
+    def abort(self) -> None:
+        self.writer.abort()
+
+
+def _tree_digest(tree: Tree) -> str:
+    from smccli.tree import digest
+
+    return digest(tree)
+
+
+# --- episodes -----------------------------------------------------------------------------
+
+
+def demo_duration(path: Sequence[Edge]) -> float:
+    """Sum over the edges taken of their source fragments' mean duration [s]."""
+    return float(sum(np.mean([s.t1 - s.t0 for s in e.sources]) for e in path if e.sources))
+
+
+def episode(tree: Tree, scene: Scene, layout: Layout, *, seed: int = 0,
+            output: Path | None = None, force: bool = False,
+            evaluate: Callable[[Sim], None] | None = None) -> EpisodeResult:
+    """Run Algorithm 2 once on ``layout`` and score it. ``evaluate`` runs first thing after
+    control (tests use it to re-enable object queries)."""
+    wall0 = time.perf_counter()
+    sim = Sim(scene, layout)
+    log = None
+    try:
+        if output is not None:
+            log = _ReplayLog(Path(output), scene, sim, tree, seed, layout, force)
+        sensors = Sensors(sim, on_step=None if log is None else log.on_step)
+        sensors.render_camera()  # the camera is running before the task starts (GL warm-up)
+        ctl = Controller(tree, scene, sensors,
+                         on_decision=None if log is None else log.on_decision)
+        t0 = sim.t
+        outcome, reason, decisions, actions, path = ctl.run()
+        duration = sim.t - t0
+        if outcome == "success":
+            for _ in range(round(FINAL_SETTLE / sim.control_period)):
+                ctl._hold()
+        if log is not None:
+            log.close()
+            log = None
+    except BaseException:
+        if log is not None:
+            log.abort()
+        raise
+    finally:
+        sim.close()
+    # --- evaluation: control is over, the simulator may be read ---
+    if evaluate is not None:
+        evaluate(sim)
+    final = {o.name: [float(v) for v in sim.object_pose(o.name)] for o in scene.objects}
+    obj = manipulated_object(scene, layout, final)
+    ok = False
+    if outcome == "success":
+        verdict = sim.success()
+        ok = bool(verdict)
+        reason = verdict.reason
+        if not ok:
+            outcome = classify_failure(scene, layout, final, actions, obj)
+    return EpisodeResult(outcome=outcome, success=ok, reason=reason, decisions=tuple(decisions),
+                         actions=tuple(actions), path=tuple(e.id for e in path), layout=layout,
+                         duration=duration, demo_duration=demo_duration(path),
+                         wall_time=time.perf_counter() - wall0, manipulated=obj,
+                         final_poses=final, output=None if output is None else Path(output))
+
+
+def run_episode(tree: Path | Tree, *, scene: str | Path | Scene | None = None, seed: int = 0,
+                layout: Path | Layout | None = None, output: Path | None = None,
+                report: Path | None = None, force: bool = False) -> EpisodeResult:
+    """``smc replay TREE``: one episode on the layout file or the seed's layout (trial 0).
+
+    Raises TreeError/SceneError (exit 2) for a bad tree or scene, OutputExistsError when
+    an output exists without ``force``.
+    """
+    t, sc = resolve(tree, scene)
+    for out in (output, report):
+        if out is not None and Path(out).exists() and not force:
+            raise OutputExistsError(f"{out}: exists (use --force to overwrite)")
+    if layout is None:
+        lay = layout_for(sc, seed)
+    elif isinstance(layout, dict):
+        lay = layout
+    else:
+        lay = read_layout(Path(layout), sc)
+    result = episode(t, sc, lay, seed=seed, output=output, force=force)
+    if report is not None:
+        doc = {"tree": str(tree) if not isinstance(tree, Tree) else None,
+               "tree_digest": _tree_digest(t), "scene": sc.name, "seed": seed,
+               **result.to_report()}
+        Path(report).write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n")
+    return result
+
+
+def print_episode(result: EpisodeResult, console: Any) -> None:
+    """Human summary of an episode (rich console)."""
+    from rich.table import Table
+
+    colour = "green" if result.success else "red"
+    console.print(f"[bold {colour}]{result.outcome}[/]: {result.reason}", highlight=False)
+    table = Table("node", "chosen", "candidates (d_p, * = contingent)", "goal", "latency [ms]")
+    for d in result.decisions:
+        cands = ", ".join(f"{c.edge} {c.d_p:.3f}{'*' if c.contingent else ''}"
+                          for c in d.candidates)
+        goal = "" if d.mapped_goal is None else \
+            "[" + ", ".join(f"{v:.3f}" for v in d.mapped_goal) + "]"
+        table.add_row("/".join(d.nodes), d.chosen or "-", cands, goal,
+                      f"{1e3 * d.latency_s:.1f}")
+    console.print(table)
+    ratio = result.duration / result.demo_duration if result.demo_duration else float("nan")
+    console.print(f"task {result.duration:.2f} s (demonstration {result.demo_duration:.2f} s, "
+                  f"x{ratio:.2f}); wall {result.wall_time:.2f} s"
+                  + (f"; log {result.output}" if result.output else ""))
+
+
+# campaigns live in smccli.campaign; re-exported for the CLI
+def run_campaign(tree: Path, *, scene: str | None = None, trials: int, seed: int = 0,
+                 workers: int = 1, report: Path | None = None,
+                 on_trial: Callable[[int, int], None] | None = None) -> dict[str, Any]:
+    from smccli.campaign import run_campaign as _run
+
+    return _run(tree, scene=scene, trials=trials, seed=seed, workers=workers, report=report,
+                on_trial=on_trial)
+
+
+def print_campaign(summary: dict[str, Any], console: Any) -> None:
+    from smccli.campaign import print_campaign as _print
+
+    _print(summary, console)
+
+
+__all__ = ["OUTCOMES", "Candidate", "Controller", "Decision", "EdgeStack", "EpisodeResult",
+           "Sensors", "classify_failure", "episode", "equivalent", "layout_for", "match_edges",
+           "print_campaign", "print_episode", "read_layout", "resolve", "run_campaign",
+           "run_episode", "SmcError"]

@@ -1,0 +1,95 @@
+"""Campaigns: randomised layouts over worker processes, statistics, the report and gating."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from replay_fixtures import REPO, build, cache_root  # noqa: E402
+
+from smccli import campaign as cp  # noqa: E402
+from smccli.replay import resolve  # noqa: E402
+
+PY = str(REPO / ".venv" / "bin" / "python")
+KEYS = {"trials", "successes", "success_rate", "ci95", "by_band", "failures", "latency_ms"}
+
+
+@pytest.fixture(scope="session")
+def trees(tmp_path_factory) -> dict[str, Path]:
+    root = cache_root(tmp_path_factory)
+    return {s: build(root, s)[1] for s in ("bench_pick", "pick_place", "weigh_sort")}
+
+
+def test_wilson_interval():
+    assert cp.wilson(0, 0) == (0.0, 1.0)
+    lo, hi = cp.wilson(0, 10)
+    assert lo == 0.0 and hi == pytest.approx(0.2775, abs=1e-4)
+    lo, hi = cp.wilson(95, 100)
+    assert (lo, hi) == (pytest.approx(0.8882, abs=1e-4), pytest.approx(0.9785, abs=1e-4))
+    lo, hi = cp.wilson(10, 10)
+    assert lo == pytest.approx(0.7225, abs=1e-4) and hi == 1.0
+
+
+def test_same_seed_same_results_with_1_and_2_workers(trees):
+    tree, scene = resolve(trees["bench_pick"], None)
+    one = cp.run_trials(tree, scene, trials=4, seed=3, workers=1)
+    two = cp.run_trials(tree, scene, trials=4, seed=3, workers=2)
+
+    def key(r: cp.TrialResult) -> tuple:
+        return (r.index, r.outcome, r.success, r.path, r.layout, round(r.duration, 9),
+                round(r.distance, 12))
+
+    assert [key(r) for r in one] == [key(r) for r in two]
+    again = cp.run_trials(tree, scene, trials=2, seed=4, workers=1)
+    assert [r.layout for r in again] != [r.layout for r in one[:2]]
+
+
+def test_report_keys_and_min_success_gate(trees, tmp_path):
+    report = tmp_path / "campaign.json"
+    env = {**os.environ, "MUJOCO_GL": "egl"}
+    args = [PY, "-m", "smccli.cli", "replay", str(trees["bench_pick"]), "--trials", "2",
+            "--seed", "1", "--workers", "1", "--report", str(report)]
+    ok = subprocess.run([*args, "--min-success", "0.5"], capture_output=True, text=True,
+                        env=env, timeout=300)
+    assert ok.returncode == 0, ok.stderr
+    doc = json.loads(report.read_text())
+    assert KEYS <= set(doc)
+    assert doc["trials"] == 2 and 0 <= doc["ci95"][0] <= doc["success_rate"] <= doc["ci95"][1]
+    assert set(doc["latency_ms"]) >= {"p50", "p95"}
+    assert set(doc["failures"]) >= {"no_contingent_smc", "grasp_missed", "object_dropped",
+                                    "placed_outside", "target_unreachable", "timeout"}
+    assert sum(b["trials"] for b in doc["by_band"]) == 2
+    gated = subprocess.run([*args, "--min-success", "1.01"], capture_output=True, text=True,
+                           env=env, timeout=300)
+    assert gated.returncode == 1 and "below --min-success" in gated.stderr
+    assert "Traceback" not in gated.stderr
+
+
+@pytest.mark.slow
+def test_bench_pick_campaign_of_40(trees):
+    s = cp.run_campaign(trees["bench_pick"], trials=40, seed=0, workers=2)
+    assert s["success_rate"] >= 0.95, s["failures"]
+    assert s["trials"] == 40 and math.isfinite(s["latency_ms"]["p50"])
+
+
+@pytest.mark.slow
+def test_pick_place_campaign(trees):
+    s = cp.run_campaign(trees["pick_place"], trials=12, seed=0, workers=2)
+    assert s["success_rate"] >= 0.9, s["failures"]
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=False, reason=(
+    "compile reads the scale at the regrasp decision inside the gripper-squeeze transient "
+    "(median over 0.15 s from the close edge: 0.124 kg light / 0.434 kg heavy), which replay "
+    "cannot reproduce within T_hP * weight_scale = 5 g; see docs/replay.md"))
+def test_weigh_sort_campaign(trees):
+    s = cp.run_campaign(trees["weigh_sort"], trials=12, seed=0, workers=2)
+    assert s["success_rate"] >= 0.9, s["failures"]

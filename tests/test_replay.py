@@ -1,0 +1,191 @@
+"""Replay (Algorithm 2) on the real MuJoCo scenes: episodes, the replay log, stops, errors,
+and the honesty rule (control never reads object state or the ground-truth topic)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from replay_fixtures import REPO, build, cache_root  # noqa: E402
+
+from smccli import replay as rp  # noqa: E402
+from smccli.contingency import match_context  # noqa: E402
+from smccli.logs import read_log, strip_topic  # noqa: E402
+from smccli.sim import Sim  # noqa: E402
+
+PY = str(REPO / ".venv" / "bin" / "python")
+
+
+@pytest.fixture(scope="session")
+def bench(tmp_path_factory) -> tuple[list[Path], Path]:
+    return build(cache_root(tmp_path_factory), "bench_pick")
+
+
+@pytest.fixture(scope="session")
+def pick_demo1(tmp_path_factory) -> tuple[list[Path], Path]:
+    return build(cache_root(tmp_path_factory), "pick_place", ["demo1"])
+
+
+def cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    env = {**os.environ, "MUJOCO_GL": "egl", "COLUMNS": "200"}
+    return subprocess.run([PY, "-m", "smccli.cli", "replay", *args], capture_output=True,
+                          text=True, env=env, cwd=cwd, timeout=300)
+
+
+def decisions_of(result: rp.EpisodeResult) -> list[tuple]:
+    return [(d.nodes, d.chosen, [round(c.d_p, 9) for c in d.candidates],
+             None if d.mapped_goal is None else np.round(d.mapped_goal, 9).tolist())
+            for d in result.decisions]
+
+
+def test_episode_on_a_new_layout_succeeds_and_logs_decisions(bench, tmp_path):
+    _, tree = bench
+    out, report = tmp_path / "replay.mcap", tmp_path / "report.json"
+    result = rp.run_episode(tree, seed=7, output=out, report=report)
+    assert result.outcome == "success", result.reason
+    assert result.success and result.path == ("e1", "e2")
+    log = read_log(out)
+    assert [d["chosen"] for d in log.decisions] == ["e1", "e2"]
+    first = log.decisions[0]
+    assert first["node"] == "n0" and first["candidates"][0]["contingent"] is True
+    assert len(first["mapped_goal"]) == 4 and first["timings"]["perceive"] > 0
+    assert len(log.point_clouds) == 2 and all(len(p.points) > 100 for p in log.point_clouds)
+    assert len(log.frames) > 10 and len(log.commands) > 300  # the recorder's topics
+    doc = json.loads(report.read_text())
+    assert doc["outcome"] == "success" and doc["success"] is True
+    assert len(doc["latency_ms"]["per_decision"]) == 2
+    assert doc["demo_duration_s"] == pytest.approx(result.demo_duration) and doc["duration_s"] > 0
+    # The mapped grasp goal sits on the white box where it really is (evaluation only).
+    box = rp.layout_for(result and rp.resolve(tree, None)[1], 7)["white_box"]
+    assert np.hypot(*(np.array(first["mapped_goal"][:2]) - box[:2])) < 0.01
+
+
+def test_vectorised_match_equals_match_context(tmp_path_factory, bench):
+    from smccli.perception import clusters_from_frame
+    from smccli.robot_model import RobotModel
+
+    _, tree_path = build(cache_root(tmp_path_factory), "pick_place")
+    for path in (tree_path, bench[1]):
+        tree, scene = rp.resolve(path, None)
+        sim = Sim(scene, rp.layout_for(scene, 3))
+        frame = sim.render_camera()
+        js = sim.joint_state()
+        geom = RobotModel.from_mjcf(scene.mjcf, js.names).geometry_for(js.position)
+        clusters = clusters_from_frame(frame, geom, tree.params.perception)
+        sim.close()
+        for weight in (None, 0.0, 0.3):
+            edges = [e for e in tree.edges if (e.smc.perception.weight is None) == (weight is None)]
+            stack = rp.EdgeStack.build(edges)
+            d, idx = rp.match_edges(stack, clusters, weight, tree.params)
+            for i, e in enumerate(edges):
+                m = match_context(e.smc.perception, clusters, weight, tree.params)
+                assert d[i] == pytest.approx(m.d_p, abs=1e-9)
+                assert (None if idx[i] < 0 else idx[i]) == m.cluster_index
+
+
+def test_no_contingent_smc_lists_distances_and_exits_1(pick_demo1, tmp_path):
+    _, tree = pick_demo1  # one branch: the orange cube onto the green cylinder
+    layout = tmp_path / "no_cube.yaml"
+    # The cube is off the table (out of the camera's crop); the pyramid looks different.
+    layout.write_text("orange_cube: [0.2, -1.6, 0.025, 0.0]\n")
+    result = rp.run_episode(tree, layout=layout)
+    assert result.outcome == "no_contingent_smc" and not result.success
+    (dec,) = result.decisions
+    assert dec.chosen is None and dec.candidates and not dec.candidates[0].contingent
+    assert "e1 d_p=" in result.reason
+    proc = cli(str(tree), "--layout", str(layout))
+    assert proc.returncode == 1, proc.stderr
+    assert "no_contingent_smc" in proc.stdout and "d_p=" in proc.stdout
+    assert "Traceback" not in proc.stderr
+
+
+def test_bad_tree_files_give_one_line_and_exit_2(bench, tmp_path):
+    _, tree = bench
+    corrupt = tmp_path / "corrupt.json"
+    corrupt.write_text('{"format": "smc-tree", "schema_')
+    other_version = tmp_path / "v99.json"
+    doc = json.loads(Path(tree).read_text())
+    other_version.write_text(json.dumps({**doc, "schema_version": 99}))
+    cases = [
+        (str(tmp_path / "missing.json"), []),
+        (str(corrupt), []),
+        (str(other_version), []),
+        (str(tree), ["--scene", "pick_place"]),  # built for bench_pick
+    ]
+    for path, extra in cases:
+        proc = cli(path, *extra)
+        lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+        assert proc.returncode == 2, (path, proc.stderr)
+        assert len(lines) == 1 and "error" in lines[0], proc.stderr
+        assert "Traceback" not in proc.stderr
+
+
+def test_control_never_reads_object_state(bench, monkeypatch):
+    _, tree_path = bench
+    tree, scene = rp.resolve(tree_path, None)
+    layout = rp.layout_for(scene, 11)
+    reference = rp.episode(tree, scene, layout)
+
+    def forbidden(*_a, **_k):
+        raise AssertionError("object state read during control")
+
+    for name in ("ground_truth", "object_pose", "object_speed", "holds", "success"):
+        monkeypatch.setattr(Sim, name, forbidden)
+    honest = rp.episode(tree, scene, layout, evaluate=lambda sim: monkeypatch.undo())
+    assert honest.outcome == reference.outcome == "success"
+    assert decisions_of(honest) == decisions_of(reference)
+
+
+def test_same_decisions_without_the_ground_truth_topic(bench, tmp_path):
+    from replay_fixtures import CROP
+
+    from smccli.compile import compile_logs
+
+    (log,), tree_path = bench
+    stripped = strip_topic(log, tmp_path / "stripped.mcap", "/sim/ground_truth")
+    assert "/sim/ground_truth" not in read_log(stripped).topic_counts
+    tree2 = tmp_path / "tree2.json"
+    compile_logs([stripped], tree2, overrides=CROP)
+    tree, scene = rp.resolve(tree_path, None)
+    other, _ = rp.resolve(tree2, None)
+    layout = rp.layout_for(scene, 5)
+    a = rp.episode(tree, scene, layout)
+    b = rp.episode(other, scene, layout)
+    assert a.outcome == b.outcome == "success"
+    assert decisions_of(a) == decisions_of(b)
+
+
+def test_frontier_keeps_branches_that_differ_only_by_path_shape(bench):
+    import dataclasses
+
+    from smccli.tree import insert_chain
+
+    _, tree_path = bench
+    tree, scene = rp.resolve(tree_path, None)
+    edges = tree.edges
+    # The same demonstration with another path shape (forcing weights x 4): Algorithm 1
+    # hangs it as a second branch from the root.
+    chain = [dataclasses.replace(e.smc, action=dataclasses.replace(
+        e.smc.action, dmp=dataclasses.replace(e.smc.action.dmp,
+                                              weights=4 * e.smc.action.dmp.weights)))
+        for e in edges]
+    forked = insert_chain(tree, chain, [e.sources[0] for e in edges])
+    assert len(forked.children("n0")) == 2
+    a, b = forked.children("n0")
+    assert rp.equivalent(a, b, forked.params)
+    result = rp.episode(forked, scene, rp.layout_for(scene, 2))
+    assert result.outcome == "success", result.reason
+    assert len(result.decisions[1].nodes) == 2  # both branches' decision points
+    assert len(result.decisions[1].candidates) == 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(pytest.main([__file__, "-q"]))
