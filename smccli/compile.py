@@ -151,8 +151,12 @@ def _action(log: Log, frag: Fragment, cluster, params: SmcParams) -> Action:
         goal, frame = goal_in_object(goal_world, cluster), "object"
     else:
         goal, frame = goal_world, "world"
-    return Action(dmp=dmp, goal_frame=frame, goal=goal, gripper_start=float(cmds[0].gripper),
-                  gripper_end=float(cmds[-1].gripper))
+    grip = np.array([c.gripper for c in cmds])
+    switches = np.nonzero(np.abs(np.diff(grip)) > 0.25)[0]
+    # The last switch of the gripper command, as a phase of the fragment (1 = at its end).
+    phase = float(t[switches[-1] + 1] / t[-1]) if len(switches) and t[-1] > 0 else 1.0
+    return Action(dmp=dmp, goal_frame=frame, goal=goal, gripper_start=float(grip[0]),
+                  gripper_end=float(grip[-1]), gripper_phase=min(max(phase, 1e-3), 1.0))
 
 
 def _required_topics(log: Log) -> set[str]:

@@ -122,5 +122,6 @@ def merge(a: Smc, b: Smc, support_a: int, support_b: int = 1) -> Smc:
         goal=goal,
         gripper_start=(wa * aa.gripper_start + wb * ab.gripper_start) / (wa + wb),
         gripper_end=(wa * aa.gripper_end + wb * ab.gripper_end) / (wa + wb),
+        gripper_phase=(wa * aa.gripper_phase + wb * ab.gripper_phase) / (wa + wb),
     )
     return Smc(perception=SalientPerceptions(cluster=cluster, weight=weight), action=action)

@@ -48,6 +48,9 @@ class Action:
     """Gripper command at the fragment's start, in [0, 1] (1 = open)."""
     gripper_end: float
     """Gripper command at the fragment's end, in [0, 1]."""
+    gripper_phase: float = 1.0
+    """When the gripper command switched, as a fraction of the fragment's duration in
+    (0, 1]; 1 = at the end. A grasp-and-lift fragment closes midway, then lifts."""
 
     @property
     def event(self) -> str:
@@ -169,6 +172,7 @@ def smc_to_dict(smc: Smc) -> tuple[dict[str, Any], dict[str, Any]]:
         "goal": _to_json(a.goal),
         "gripper_start": a.gripper_start,
         "gripper_end": a.gripper_end,
+        "gripper_phase": a.gripper_phase,
         "dmp": dmp_mod.to_dict(a.dmp),
     }
     return perception, action
@@ -188,5 +192,6 @@ def smc_from_dict(perception: dict[str, Any], action: dict[str, Any]) -> Smc:
             goal=np.asarray(action["goal"], dtype=float),
             gripper_start=float(action["gripper_start"]),
             gripper_end=float(action["gripper_end"]),
+            gripper_phase=float(action.get("gripper_phase", 1.0)),
         ),
     )
