@@ -64,7 +64,7 @@ def test_episode_on_a_new_layout_succeeds_and_logs_decisions(bench, tmp_path):
     assert len(doc["latency_ms"]["per_decision"]) == 2
     assert doc["demo_duration_s"] == pytest.approx(result.demo_duration) and doc["duration_s"] > 0
     # The mapped grasp goal sits on the white box where it really is (evaluation only).
-    box = rp.layout_for(result and rp.resolve(tree, None)[1], 7)["white_box"]
+    box = rp.layout_for(rp.resolve(tree, None)[1], 7)["white_box"]
     assert np.hypot(*(np.array(first["mapped_goal"][:2]) - box[:2])) < 0.01
 
 
