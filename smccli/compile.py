@@ -196,9 +196,11 @@ def compile_logs(
                 raise TreeError(f"{out}: --set {' '.join(overrides)} differs from the tree's "
                                 "parameters; use --rebuild to start afresh")
         else:
-            old_version = load_tree(out).version if (out.exists() and rebuild) else 0
+            # A rebuild starts a new tree but keeps the version growing and the history.
+            old = load_tree(out) if (out.exists() and rebuild) else None
             tree = Tree(params=with_overrides(SmcParams(), list(overrides)),
-                        version=old_version)
+                        version=old.version if old else 0,
+                        history=old.history if old else ())
         known = tree.log_digests()
         added: list[Chain] = []
         skipped: list[Path] = []

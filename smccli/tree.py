@@ -70,8 +70,8 @@ class Tree:
         return [e for e in self.edges if e.parent == node]
 
     def log_digests(self) -> set[str]:
-        """sha256 of every log compiled into the tree."""
-        return {log["sha256"] for h in self.history for log in h.get("logs", [])}
+        """sha256 of every log whose fragments are in the tree."""
+        return {s.sha256 for e in self.edges for s in e.sources}
 
 
 def insert_chain(tree: Tree, chain: Sequence[Smc], sources: Sequence[Source]) -> Tree:
