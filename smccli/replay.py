@@ -66,6 +66,8 @@ FINAL_SETTLE = 1.0
 """Sim time the scene settles at a leaf before scoring [s]."""
 WEIGHT_WINDOW = 0.15
 """The scale is read as the median over this window at a decision point [s] (as compile)."""
+MIDWAY_PHASE = 0.95
+"""A gripper switch before this phase of a fragment happens midway through the rollout."""
 EMPTY_GRIP = 0.08
 """A closed gripper whose opening is below this holds nothing [fraction of full opening]."""
 
@@ -517,29 +519,47 @@ class Controller:
         grip = 1.0 if a.gripper_start >= 0.5 else 0.0
         _, path = rollout(a.dmp, start=start, goal=goal, duration=duration,
                           n_steps=max(2, round(duration / s.control_period)) + 1)
-        for y in path[1:]:
+        end = 1.0 if a.gripper_end >= 0.5 else 0.0
+        # A gripper switch inside the fragment (e.g. grasp, then lift): stream the rollout to
+        # that phase, hold there while the fingers move, then go on with the new opening.
+        midway = a.event != "none" and a.gripper_phase < MIDWAY_PHASE
+        k = int(round(a.gripper_phase * (len(path) - 1))) if midway else len(path) - 1
+        for y in path[1:k + 1]:
             self._send(PoiCommand(s.t, y, grip))
-        arrived = False
-        for _ in range(round(MAX_HOLD / s.control_period)):
-            if np.linalg.norm(s.poi()[:3] - goal[:3]) < ARRIVAL_TOLERANCE:
-                arrived = True
-                break
-            self._send(PoiCommand(s.t, goal, grip))
-        if a.event != "none":
-            end = 1.0 if a.gripper_end >= 0.5 else 0.0
-            still, t_ev = 0, s.t
-            self._edge_weights = [s.weight()] if s.has_scale else []
-            while True:
-                self._send(PoiCommand(s.t, goal, end))
-                if s.has_scale and s.t - t_ev <= WEIGHT_WINDOW + 1e-9:
-                    self._edge_weights.append(s.weight())
-                moving = abs(s.gripper_speed()) > 0.02
-                still = 0 if moving else still + 1
-                el = s.t - t_ev
-                if (el > 0.15 and still >= 10) or el > 3.0:
-                    break
+        if midway:
+            self._arrive(path[k], grip)
+            self._gripper_event(path[k], end, record_weight=False)
+            for y in path[k + 1:]:
+                self._send(PoiCommand(s.t, y, end))
+            grip = end
+        arrived = self._arrive(goal, grip)
+        if a.event != "none" and not midway:
+            self._gripper_event(goal, end, record_weight=True)
         return ActionTrace(edge=edge.id, event=a.event, t0=t0, t1=s.t, opening_before=opening0,
                            opening_after=s.gripper_opening(), arrived=arrived)
+
+    def _arrive(self, target: np.ndarray, grip: float) -> bool:
+        """Hold ``target`` until the POI is within the tolerance (at most MAX_HOLD)."""
+        s = self.sensors
+        for _ in range(round(MAX_HOLD / s.control_period)):
+            if np.linalg.norm(s.poi()[:3] - target[:3]) < ARRIVAL_TOLERANCE:
+                return True
+            self._send(PoiCommand(s.t, target, grip))
+        return bool(np.linalg.norm(s.poi()[:3] - target[:3]) < ARRIVAL_TOLERANCE)
+
+    def _gripper_event(self, target: np.ndarray, opening: float, record_weight: bool) -> None:
+        """Command ``opening`` and wait until the fingers stop, as the scripted operator."""
+        s = self.sensors
+        still, t_ev = 0, s.t
+        self._edge_weights = [s.weight()] if (s.has_scale and record_weight) else []
+        while True:
+            self._send(PoiCommand(s.t, target, opening))
+            if record_weight and s.has_scale and s.t - t_ev <= WEIGHT_WINDOW + 1e-9:
+                self._edge_weights.append(s.weight())
+            still = 0 if abs(s.gripper_speed()) > 0.02 else still + 1
+            el = s.t - t_ev
+            if (el > 0.15 and still >= 10) or el > 3.0:
+                return
 
     def run(self) -> tuple[str, str, list[Decision], list[ActionTrace], list[Edge]]:
         """Algorithm 2 from the root to a leaf: (outcome, reason, decisions, actions, path)."""

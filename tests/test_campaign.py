@@ -86,10 +86,6 @@ def test_pick_place_campaign(trees):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason=(
-    "compile reads the scale at the regrasp decision inside the gripper-squeeze transient "
-    "(median over 0.15 s from the close edge: 0.124 kg light / 0.434 kg heavy), which replay "
-    "cannot reproduce within T_hP * weight_scale = 5 g; see docs/replay.md"))
 def test_weigh_sort_campaign(trees):
     s = cp.run_campaign(trees["weigh_sort"], trials=12, seed=0, workers=2)
     assert s["success_rate"] >= 0.9, s["failures"]
