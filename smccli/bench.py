@@ -35,8 +35,6 @@ from smccli.scene import Scene  # noqa: E402
 from smccli.tree import ROOT, Edge, Tree  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
-CROP = ["perception.crop_min=0.1,-0.7,-0.05", "perception.crop_max=1.2,0.7,0.6"]
-"""The crop box for the built-in scenes' table top at z = 0 (the default expects ~0.75 m)."""
 
 
 def _log(msg: str) -> None:
@@ -58,7 +56,7 @@ def demo_tree(scene: str, work: Path) -> Path:
                 record(RecordConfig(scene=scene, script=script, output=log, seed=0))
         logs.append(log)
     tree = work / f"{scene}_tree.json"
-    compile_logs(logs, tree, overrides=CROP, rebuild=True)
+    compile_logs(logs, tree, rebuild=True)
     return tree
 
 

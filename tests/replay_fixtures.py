@@ -12,10 +12,6 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 REPO = Path(__file__).resolve().parent.parent
 SCRIPTS = REPO / "sample_logs"
-# The perception crop box defaults to a table top at ~0.75 m, while the built-in scenes put
-# the table top at z = 0 (world origin at the arm's base on the table): without this
-# override compile sees no object at all (see docs/replay.md, "known issues").
-CROP = ["perception.crop_min=0.1,-0.7,-0.05", "perception.crop_max=1.2,0.7,0.6"]
 DEMOS = {"bench_pick": ["demo"], "pick_place": ["demo1", "demo2"],
          "weigh_sort": ["demo_light", "demo_heavy"]}
 
@@ -41,7 +37,7 @@ def build(root: Path, scene: str, names: list[str] | None = None, *,
         logs = [record_demo(scene, n, root / f"{scene}_{n}.mcap") for n in names]
         tree = root / f"{scene}{tag}_{'_'.join(names)}.json"
         if not tree.exists():
-            compile_logs(logs, tree, overrides=CROP)
+            compile_logs(logs, tree)
     return logs, tree
 
 

@@ -145,15 +145,13 @@ def test_control_never_reads_object_state(bench, monkeypatch):
 
 
 def test_same_decisions_without_the_ground_truth_topic(bench, tmp_path):
-    from replay_fixtures import CROP
-
     from smccli.compile import compile_logs
 
     (log,), tree_path = bench
     stripped = strip_topic(log, tmp_path / "stripped.mcap", "/sim/ground_truth")
     assert "/sim/ground_truth" not in read_log(stripped).topic_counts
     tree2 = tmp_path / "tree2.json"
-    compile_logs([stripped], tree2, overrides=CROP)
+    compile_logs([stripped], tree2)
     tree, scene = rp.resolve(tree_path, None)
     other, _ = rp.resolve(tree2, None)
     layout = rp.layout_for(scene, 5)
