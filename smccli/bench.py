@@ -67,9 +67,16 @@ def check_ranges(scene: Scene, obj: str) -> dict[str, Any]:
     yaw = o.range_yaw[1] - o.range_yaw[0]
     along, across = max(sx, sy), min(sx, sy)
     ok = along >= 0.5 - 1e-6 and across >= 0.25 - 1e-6 and yaw >= 2 * math.pi - 1e-3
-    return {"object": obj, "range_x": list(o.range_x), "range_y": list(o.range_y),
-            "range_yaw": list(o.range_yaw), "along_m": along, "across_m": across,
-            "yaw_rad": yaw, "covers_paper_setup": ok}
+    return {
+        "object": obj,
+        "range_x": list(o.range_x),
+        "range_y": list(o.range_y),
+        "range_yaw": list(o.range_yaw),
+        "along_m": along,
+        "across_m": across,
+        "yaw_rad": yaw,
+        "covers_paper_setup": ok,
+    }
 
 
 def serial_latency(tree: Tree, scene: Scene, n: int = 20, seed: int = 99) -> dict[str, Any]:
@@ -88,9 +95,14 @@ def serial_latency(tree: Tree, scene: Scene, n: int = 20, seed: int = 99) -> dic
         finally:
             sim.close()
     tot = np.add(per, mat)
-    return {"p50": float(np.median(tot)), "p95": float(np.percentile(tot, 95)),
-            "perceive_p50": float(np.median(per)), "match_p50": float(np.median(mat)),
-            "decisions": n, "resolution": f"{scene.camera.width}x{scene.camera.height}"}
+    return {
+        "p50": float(np.median(tot)),
+        "p95": float(np.percentile(tot, 95)),
+        "perceive_p50": float(np.median(per)),
+        "match_p50": float(np.median(mat)),
+        "decisions": n,
+        "resolution": f"{scene.camera.width}x{scene.camera.height}",
+    }
 
 
 def match_1000(tree: Tree, scene: Scene, n_edges: int = 1000, reps: int = 200) -> dict[str, Any]:
@@ -101,8 +113,17 @@ def match_1000(tree: Tree, scene: Scene, n_edges: int = 1000, reps: int = 200) -
     from smccli.sim import Sim
 
     real = list(tree.edges)
-    edges = tuple(Edge(id=f"s{k}", parent=ROOT, child=f"c{k}", smc=real[k % len(real)].smc,
-                       support=1, sources=()) for k in range(n_edges))
+    edges = tuple(
+        Edge(
+            id=f"s{k}",
+            parent=ROOT,
+            child=f"c{k}",
+            smc=real[k % len(real)].smc,
+            support=1,
+            sources=(),
+        )
+        for k in range(n_edges)
+    )
     sim = Sim(scene, rp.layout_for(scene, 0))
     frame = sim.render_camera()
     js = sim.joint_state()
@@ -120,10 +141,13 @@ def match_1000(tree: Tree, scene: Scene, n_edges: int = 1000, reps: int = 200) -
     for e in edges:
         match_context(e.smc.perception, clusters, None, tree.params)
     loop = time.perf_counter() - t0
-    return {"edges": n_edges, "clusters": len(clusters),
-            "vectorised_ms_p50": 1e3 * float(np.median(times)),
-            "vectorised_ms_p95": 1e3 * float(np.percentile(times, 95)),
-            "per_edge_loop_ms": 1e3 * loop}
+    return {
+        "edges": n_edges,
+        "clusters": len(clusters),
+        "vectorised_ms_p50": 1e3 * float(np.median(times)),
+        "vectorised_ms_p95": 1e3 * float(np.percentile(times, 95)),
+        "per_edge_loop_ms": 1e3 * loop,
+    }
 
 
 def plots(summary: dict[str, Any], out: Path) -> list[str]:
@@ -138,8 +162,12 @@ def plots(summary: dict[str, Any], out: Path) -> list[str]:
     fig, ax = plt.subplots(figsize=(6, 3.6))
     x = np.arange(len(bands))
     rates = [100 * b["success_rate"] for b in bands]
-    err = np.array([[r - 100 * b["ci95"][0], 100 * b["ci95"][1] - r] for r, b in zip(rates, bands,
-                                                                                      strict=True)]).T
+    err = np.array(
+        [
+            [r - 100 * b["ci95"][0], 100 * b["ci95"][1] - r]
+            for r, b in zip(rates, bands, strict=True)
+        ]
+    ).T
     ax.bar(x, rates, color="#4c8bf5", yerr=err, capsize=3)
     for xi, b in zip(x, bands, strict=True):
         ax.text(float(xi), 2, f"n={b['trials']}", ha="center", fontsize=7, color="white")
@@ -147,8 +175,11 @@ def plots(summary: dict[str, Any], out: Path) -> list[str]:
     ax.set_ylim(0, 105)
     ax.set_ylabel("success [%]")
     ax.set_xlabel("distance of the white box from the demonstrated position [m]")
-    ax.set_title(f"bench_pick: {100 * summary['success_rate']:.2f} % of {summary['trials']} "
-                 "trials (bars: Wilson 95 %)", fontsize=9)
+    ax.set_title(
+        f"bench_pick: {100 * summary['success_rate']:.2f} % of {summary['trials']} "
+        "trials (bars: Wilson 95 %)",
+        fontsize=9,
+    )
     fig.tight_layout()
     f11 = out / "bench_success_by_band.png"
     fig.savefig(f11, dpi=120)
@@ -174,8 +205,10 @@ def plots(summary: dict[str, Any], out: Path) -> list[str]:
     f12 = out / "bench_timing.png"
     fig.savefig(f12, dpi=120)
     plt.close(fig)
-    return [str(f11.relative_to(REPO)) if f11.is_relative_to(REPO) else str(f11),
-            str(f12.relative_to(REPO)) if f12.is_relative_to(REPO) else str(f12)]
+    return [
+        str(f11.relative_to(REPO)) if f11.is_relative_to(REPO) else str(f11),
+        str(f12.relative_to(REPO)) if f12.is_relative_to(REPO) else str(f12),
+    ]
 
 
 def _progress(name: str, total: int):
@@ -185,37 +218,52 @@ def _progress(name: str, total: int):
         if done % 25 == 0 or done == total:
             rate = done / (time.perf_counter() - t0)
             _log(f"{name}: {done}/{total} trials, {ok} succeeded, {rate:.2f} trials/s")
+
     return on_trial
 
 
 def _strip(summary: dict[str, Any]) -> dict[str, Any]:
     """The summary without per-trial arrays that bloat the JSON (kept: outcome and distance)."""
     s = dict(summary)
-    s["trial_results"] = [{k: t[k] for k in ("index", "outcome", "success", "distance",
-                                             "yaw_distance", "duration")}
-                          for t in summary["trial_results"]]
-    s["failed_trials"] = [{k: t[k] for k in ("index", "outcome", "reason", "distance", "path")}
-                          for t in summary["trial_results"] if not t["success"]]
+    s["trial_results"] = [
+        {k: t[k] for k in ("index", "outcome", "success", "distance", "yaw_distance", "duration")}
+        for t in summary["trial_results"]
+    ]
+    s["failed_trials"] = [
+        {k: t[k] for k in ("index", "outcome", "reason", "distance", "path")}
+        for t in summary["trial_results"]
+        if not t["success"]
+    ]
     return s
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m smccli.bench", description=__doc__.split("\n")[0])
     ap.add_argument("--trials", type=int, default=1288, help="bench_pick trials (paper: 1288)")
-    ap.add_argument("--side-trials", type=int, default=100,
-                    help="trials of the pick_place and weigh_sort campaigns (0: skip)")
+    ap.add_argument(
+        "--side-trials",
+        type=int,
+        default=100,
+        help="trials of the pick_place and weigh_sort campaigns (0: skip)",
+    )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
-    ap.add_argument("--work", type=Path, default=REPO / "bench_results",
-                    help="logs and trees (git-ignored)")
-    ap.add_argument("--out", type=Path, default=REPO / "docs",
-                    help="bench_results.json and img/*.png go here")
+    ap.add_argument(
+        "--work", type=Path, default=REPO / "bench_results", help="logs and trees (git-ignored)"
+    )
+    ap.add_argument(
+        "--out", type=Path, default=REPO / "docs", help="bench_results.json and img/*.png go here"
+    )
     args = ap.parse_args(argv)
 
     results: dict[str, Any] = {
         "command": "python -m smccli.bench " + " ".join(argv if argv is not None else sys.argv[1:]),
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                    "python": platform.python_version(), "gl": os.environ.get("MUJOCO_GL")},
+        "machine": {
+            "cpus": os.cpu_count(),
+            "platform": platform.platform(),
+            "python": platform.python_version(),
+            "gl": os.environ.get("MUJOCO_GL"),
+        },
         "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
     }
     _log("compiling bench_pick's demonstration")
@@ -228,9 +276,13 @@ def main(argv: list[str] | None = None) -> int:
     results["match_1000_edges"] = match_1000(tree, scene)
     _log(f"latency {results['latency_serial_ms']}, match {results['match_1000_edges']}")
 
-    summary = cp.run_campaign(tree_path, trials=args.trials, seed=args.seed,
-                              workers=args.workers,
-                              on_trial=_progress("bench_pick", args.trials))
+    summary = cp.run_campaign(
+        tree_path,
+        trials=args.trials,
+        seed=args.seed,
+        workers=args.workers,
+        on_trial=_progress("bench_pick", args.trials),
+    )
     results["figures"] = plots(summary, args.out / "img")
     results["bench_pick"] = _strip(summary)
     bands = [b for b in summary["by_band"] if b["trials"]]
@@ -244,9 +296,13 @@ def main(argv: list[str] | None = None) -> int:
     for scene_name in ("pick_place", "weigh_sort") if args.side_trials > 0 else ():
         _log(f"compiling {scene_name}'s demonstrations")
         side_tree = demo_tree(scene_name, args.work)
-        s = cp.run_campaign(side_tree, trials=args.side_trials, seed=args.seed,
-                            workers=args.workers,
-                            on_trial=_progress(scene_name, args.side_trials))
+        s = cp.run_campaign(
+            side_tree,
+            trials=args.side_trials,
+            seed=args.seed,
+            workers=args.workers,
+            on_trial=_progress(scene_name, args.side_trials),
+        )
         results[scene_name] = _strip(s)
         results["targets"][f"{scene_name}>=0.99"] = s["success_rate"] >= 0.99
     results["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S")
@@ -254,22 +310,27 @@ def main(argv: list[str] | None = None) -> int:
     path = args.out / "bench_results.json"
     path.write_text(json.dumps(results, indent=1, allow_nan=False) + "\n")
     b = results["bench_pick"]
-    print(f"bench_pick: {b['successes']}/{b['trials']} = {100 * b['success_rate']:.2f} % "
-          f"(95 % CI {100 * b['ci95'][0]:.1f}-{100 * b['ci95'][1]:.1f}), "
-          f"{b['trials_per_second']:.2f} trials/s with {args.workers} workers")
+    print(
+        f"bench_pick: {b['successes']}/{b['trials']} = {100 * b['success_rate']:.2f} % "
+        f"(95 % CI {100 * b['ci95'][0]:.1f}-{100 * b['ci95'][1]:.1f}), "
+        f"{b['trials_per_second']:.2f} trials/s with {args.workers} workers"
+    )
     for band in bands:
         print(f"  {band['label']:>12}: {band['successes']}/{band['trials']}")
-    print(f"decision latency p50 {results['latency_serial_ms']['p50']:.1f} ms (serial), "
-          f"match at 1000 edges {results['match_1000_edges']['vectorised_ms_p50']:.3f} ms")
+    print(
+        f"decision latency p50 {results['latency_serial_ms']['p50']:.1f} ms (serial), "
+        f"match at 1000 edges {results['match_1000_edges']['vectorised_ms_p50']:.3f} ms"
+    )
     for scene_name in ("pick_place", "weigh_sort"):
         if scene_name in results:
             s = results[scene_name]
-            print(f"{scene_name}: {s['successes']}/{s['trials']} = "
-                  f"{100 * s['success_rate']:.1f} %, failures "
-                  f"{ {k: v for k, v in s['failures'].items() if v} }")
+            print(
+                f"{scene_name}: {s['successes']}/{s['trials']} = "
+                f"{100 * s['success_rate']:.1f} %, failures "
+                f"{ {k: v for k, v in s['failures'].items() if v} }"
+            )
     print(f"wrote {path}")
     return 0
-
 
 
 if __name__ == "__main__":

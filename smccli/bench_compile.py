@@ -35,7 +35,8 @@ logs = [Path(p) for p in sys.argv[2:]]
 t0 = time.perf_counter()
 r = compile_logs(logs, Path(sys.argv[1]), rebuild=True)
 dt = time.perf_counter() - t0
-print(json.dumps({"seconds": dt, "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+print(json.dumps({"seconds": dt, "peak_rss_mb": rss_mb,
                   "nodes": len(r.tree.nodes), "edges": len(r.tree.edges)}))
 """
 
@@ -49,8 +50,15 @@ def demos(n: int, scene: str = "bench_pick", script: str = "demo.yaml") -> list[
     for seed in range(n):
         path = CACHE / f"{scene}_{Path(script).stem}_s{seed}.mcap"
         if not path.exists():
-            record(RecordConfig(scene=scene, script=ROOT / "sample_logs" / scene / script,
-                                seed=seed, output=path, reproducible=True))
+            record(
+                RecordConfig(
+                    scene=scene,
+                    script=ROOT / "sample_logs" / scene / script,
+                    seed=seed,
+                    output=path,
+                    reproducible=True,
+                )
+            )
         out.append(path)
     return out
 
@@ -60,14 +68,20 @@ def compile_scaling(sizes: list[int]) -> list[dict]:
     rows = []
     for n in sizes:
         tree = CACHE.parent / f"tree_{n}.json"
-        proc = subprocess.run([sys.executable, "-c", _CHILD, str(tree), *map(str, logs[:n])],
-                              capture_output=True, text=True, check=True)
+        proc = subprocess.run(
+            [sys.executable, "-c", _CHILD, str(tree), *map(str, logs[:n])],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
         row = json.loads(proc.stdout.strip().splitlines()[-1])
         row.update(demos=n, seconds_per_demo=row["seconds"] / n)
         rows.append(row)
-        print(f"compile {n:4d} demos: {row['seconds']:7.2f} s ({row['seconds_per_demo']:.2f} "
-              f"s/demo), peak RSS {row['peak_rss_mb']:.0f} MB, tree {row['nodes']} nodes "
-              f"{row['edges']} edges")
+        print(
+            f"compile {n:4d} demos: {row['seconds']:7.2f} s ({row['seconds_per_demo']:.2f} "
+            f"s/demo), peak RSS {row['peak_rss_mb']:.0f} MB, tree {row['nodes']} nodes "
+            f"{row['edges']} edges"
+        )
     return rows
 
 
@@ -84,7 +98,7 @@ def separability(n_poses: int, seed: int = 0) -> dict:
         scene = load_scene(scene_name)
         movable = [o.name for o in scene.objects if not o.fixed and o.range_x[0] < o.range_x[1]]
         sim = Sim(scene)
-        variants = [v for v, _ in scene.variants] or [None]
+        variants: list[str | None] = [v for v, _ in scene.variants] or [None]
         for i in range(n_poses * len(variants)):
             variant = variants[i % len(variants)]
             layout = sample_layout(scene, rng, variant=variant)
@@ -94,7 +108,9 @@ def separability(n_poses: int, seed: int = 0) -> dict:
                 if name not in layout:
                     continue
                 x, y = layout[name][:2]
-                near = [c for c in clusters if np.hypot(c.centroid[0] - x, c.centroid[1] - y) < 0.03]
+                near = [
+                    c for c in clusters if np.hypot(c.centroid[0] - x, c.centroid[1] - y) < 0.03
+                ]
                 if len(near) == 1:
                     seen.setdefault(f"{scene_name}/{name}", []).append(near[0])
         sim.close()
@@ -115,12 +131,20 @@ def separability(n_poses: int, seed: int = 0) -> dict:
         diff += d
         per_object[a].setdefault("min_other", 1e9)
         per_object[a]["min_other"] = min(per_object[a]["min_other"], float(np.min(d)))
-    out = {"poses_per_object": n_poses, "same_p99": float(np.percentile(same, 99)),
-           "same_max": float(np.max(same)), "different_p1": float(np.percentile(diff, 1)),
-           "different_min": float(np.min(diff)), "t_hp": 0.1, "objects": per_object}
-    print(f"separability over {n_poses} poses/object: same-object p99 {out['same_p99']:.3f} "
-          f"(max {out['same_max']:.3f}), different-object p1 {out['different_p1']:.3f} "
-          f"(min {out['different_min']:.3f}); T_hP = 0.1")
+    out = {
+        "poses_per_object": n_poses,
+        "same_p99": float(np.percentile(same, 99)),
+        "same_max": float(np.max(same)),
+        "different_p1": float(np.percentile(diff, 1)),
+        "different_min": float(np.min(diff)),
+        "t_hp": 0.1,
+        "objects": per_object,
+    }
+    print(
+        f"separability over {n_poses} poses/object: same-object p99 {out['same_p99']:.3f} "
+        f"(max {out['same_max']:.3f}), different-object p1 {out['different_p1']:.3f} "
+        f"(min {out['different_min']:.3f}); T_hP = 0.1"
+    )
     return out
 
 
@@ -130,9 +154,12 @@ def main() -> None:
     ap.add_argument("--poses", type=int, default=100)
     args = ap.parse_args()
     t0 = time.perf_counter()
-    doc = {"command": "python -m smccli.bench_compile " + " ".join(sys.argv[1:]),
-           "cpus": os.cpu_count(), "compile": compile_scaling(args.sizes),
-           "separability": separability(args.poses)}
+    doc: dict[str, object] = {
+        "command": "python -m smccli.bench_compile " + " ".join(sys.argv[1:]),
+        "cpus": os.cpu_count(),
+        "compile": compile_scaling(args.sizes),
+        "separability": separability(args.poses),
+    }
     doc["wall_s"] = round(time.perf_counter() - t0, 1)
     (ROOT / "docs").mkdir(exist_ok=True)
     (ROOT / "docs" / "bench_compile.json").write_text(json.dumps(doc, indent=1) + "\n")

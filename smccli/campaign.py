@@ -101,12 +101,22 @@ def run_trial(tree: Tree, scene: Scene, seed: int, index: int) -> TrialResult:
         dist = math.dist(layout[obj][:2], spec.pose[:2])
         yaw = abs(math.remainder(layout[obj][3] - spec.pose[3], 2 * math.pi))
     return TrialResult(
-        index=index, outcome=r.outcome, success=r.success, object=obj, distance=dist,
-        yaw_distance=yaw, path=list(r.path), latency_ms=r.latencies_ms,
+        index=index,
+        outcome=r.outcome,
+        success=r.success,
+        object=obj,
+        distance=dist,
+        yaw_distance=yaw,
+        path=list(r.path),
+        latency_ms=r.latencies_ms,
         perceive_ms=[1e3 * d.perceive_s for d in r.decisions],
-        match_ms=[1e3 * d.match_s for d in r.decisions], duration=r.duration,
-        demo_duration=r.demo_duration, wall_time=r.wall_time, reason=r.reason,
-        layout={k: list(v) for k, v in layout.items()})
+        match_ms=[1e3 * d.match_s for d in r.decisions],
+        duration=r.duration,
+        demo_duration=r.demo_duration,
+        wall_time=r.wall_time,
+        reason=r.reason,
+        layout={k: list(v) for k, v in layout.items()},
+    )
 
 
 # --- workers ----------------------------------------------------------------------------
@@ -122,9 +132,16 @@ def _work(index: int) -> TrialResult:
     return run_trial(_WORKER["tree"], _WORKER["scene"], _WORKER["seed"], index)
 
 
-def run_trials(tree: Tree, scene: Scene, *, trials: int, seed: int = 0, workers: int = 1,
-               on_trial: Callable[[int, int], None] | None = None,
-               indices: Sequence[int] | None = None) -> list[TrialResult]:
+def run_trials(
+    tree: Tree,
+    scene: Scene,
+    *,
+    trials: int,
+    seed: int = 0,
+    workers: int = 1,
+    on_trial: Callable[[int, int], None] | None = None,
+    indices: Sequence[int] | None = None,
+) -> list[TrialResult]:
     """Run the trials (``range(trials)`` or ``indices``) over ``workers`` processes;
     results in index order. ``on_trial(done, successes)`` after each."""
     todo = list(range(trials)) if indices is None else list(indices)
@@ -138,8 +155,9 @@ def run_trials(tree: Tree, scene: Scene, *, trials: int, seed: int = 0, workers:
                 on_trial(len(results), ok)
     else:
         ctx = mp.get_context("spawn")
-        with ctx.Pool(min(workers, len(todo)), initializer=_init_worker,
-                      initargs=(tree, scene, seed)) as pool:
+        with ctx.Pool(
+            min(workers, len(todo)), initializer=_init_worker, initargs=(tree, scene, seed)
+        ) as pool:
             for res in pool.imap_unordered(_work, todo, chunksize=1):
                 results.append(res)
                 ok += res.success
@@ -155,8 +173,16 @@ def _pct(values: Sequence[float], q: float) -> float | None:
     return float(np.percentile(values, q)) if len(values) else None
 
 
-def summarize(results: Sequence[TrialResult], *, scene: Scene, tree: Tree, seed: int,
-              workers: int, wall_s: float, bands: Sequence[float] = BANDS) -> dict[str, Any]:
+def summarize(
+    results: Sequence[TrialResult],
+    *,
+    scene: Scene,
+    tree: Tree,
+    seed: int,
+    workers: int,
+    wall_s: float,
+    bands: Sequence[float] = BANDS,
+) -> dict[str, Any]:
     """The campaign summary (the ``--report`` JSON)."""
     n = len(results)
     succ = sum(r.success for r in results)
@@ -166,11 +192,16 @@ def summarize(results: Sequence[TrialResult], *, scene: Scene, tree: Tree, seed:
         if not sel and math.isinf(hi):
             continue
         k = sum(r.success for r in sel)
-        by_band.append({"band": [lo, None if math.isinf(hi) else hi],
-                        "label": f"{lo:.2f}-{hi:.2f} m" if not math.isinf(hi) else f">{lo:.2f} m",
-                        "trials": len(sel), "successes": k,
-                        "success_rate": k / len(sel) if sel else None,
-                        "ci95": list(wilson(k, len(sel)))})
+        by_band.append(
+            {
+                "band": [lo, None if math.isinf(hi) else hi],
+                "label": f"{lo:.2f}-{hi:.2f} m" if not math.isinf(hi) else f">{lo:.2f} m",
+                "trials": len(sel),
+                "successes": k,
+                "success_rate": k / len(sel) if sel else None,
+                "ci95": list(wilson(k, len(sel))),
+            }
+        )
     failures = {c: sum(r.outcome == c for r in results) for c in FAILURES}
     lat = [v for r in results for v in r.latency_ms]
     per = [v for r in results for v in r.perceive_ms]
@@ -189,22 +220,37 @@ def summarize(results: Sequence[TrialResult], *, scene: Scene, tree: Tree, seed:
         "ci95": list(wilson(succ, n)),
         "by_band": by_band,
         "failures": failures,
-        "latency_ms": {"p50": _pct(lat, 50), "p95": _pct(lat, 95), "max": max(lat, default=None),
-                       "perceive_p50": _pct(per, 50), "match_p50": _pct(mat, 50),
-                       "decisions": len(lat)},
-        "duration_s": {"p50": _pct(dur, 50), "p95": _pct(dur, 95),
-                       "demo": _pct([r.demo_duration for r in done], 50),
-                       "ratio_p50": _pct(ratio, 50)},
+        "latency_ms": {
+            "p50": _pct(lat, 50),
+            "p95": _pct(lat, 95),
+            "max": max(lat, default=None),
+            "perceive_p50": _pct(per, 50),
+            "match_p50": _pct(mat, 50),
+            "decisions": len(lat),
+        },
+        "duration_s": {
+            "p50": _pct(dur, 50),
+            "p95": _pct(dur, 95),
+            "demo": _pct([r.demo_duration for r in done], 50),
+            "ratio_p50": _pct(ratio, 50),
+        },
         "wall_s": wall_s,
         "trials_per_second": n / wall_s if wall_s > 0 else None,
         "trial_results": [asdict(r) for r in results],
     }
 
 
-def run_campaign(tree: Path | Tree, *, scene: str | Path | Scene | None = None, trials: int,
-                 seed: int = 0, workers: int = 1, report: Path | None = None,
-                 on_trial: Callable[[int, int], None] | None = None,
-                 force: bool = True) -> dict[str, Any]:
+def run_campaign(
+    tree: Path | Tree,
+    *,
+    scene: str | Path | Scene | None = None,
+    trials: int,
+    seed: int = 0,
+    workers: int = 1,
+    report: Path | None = None,
+    on_trial: Callable[[int, int], None] | None = None,
+    force: bool = True,
+) -> dict[str, Any]:
     """``smc replay TREE --trials N --seed S --workers W [--report FILE]``: the summary."""
     if trials <= 0:
         raise SmcError(f"--trials must be positive, found {trials}")
@@ -213,8 +259,9 @@ def run_campaign(tree: Path | Tree, *, scene: str | Path | Scene | None = None, 
         raise OutputExistsError(f"{report}: exists (use --force to overwrite)")
     wall0 = time.perf_counter()
     results = run_trials(t, sc, trials=trials, seed=seed, workers=workers, on_trial=on_trial)
-    summary = summarize(results, scene=sc, tree=t, seed=seed, workers=workers,
-                        wall_s=time.perf_counter() - wall0)
+    summary = summarize(
+        results, scene=sc, tree=t, seed=seed, workers=workers, wall_s=time.perf_counter() - wall0
+    )
     summary["tree"] = None if isinstance(tree, Tree) else str(tree)
     if report is not None:
         Path(report).write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
@@ -226,22 +273,30 @@ def print_campaign(summary: dict[str, Any], console: Any) -> None:
     from rich.table import Table
 
     lo, hi = summary["ci95"]
-    console.print(f"[bold]{summary['scene']}[/]: {summary['successes']}/{summary['trials']} "
-                  f"succeeded = {100 * summary['success_rate']:.1f} % "
-                  f"(95 % CI {100 * lo:.1f}-{100 * hi:.1f} %)", highlight=False)
+    console.print(
+        f"[bold]{summary['scene']}[/]: {summary['successes']}/{summary['trials']} "
+        f"succeeded = {100 * summary['success_rate']:.1f} % "
+        f"(95 % CI {100 * lo:.1f}-{100 * hi:.1f} %)",
+        highlight=False,
+    )
     table = Table("distance from demo", "trials", "success [%]", "95 % CI")
     for b in summary["by_band"]:
         rate = "-" if b["success_rate"] is None else f"{100 * b['success_rate']:.1f}"
-        table.add_row(b["label"], str(b["trials"]), rate,
-                      f"{100 * b['ci95'][0]:.0f}-{100 * b['ci95'][1]:.0f}")
+        table.add_row(
+            b["label"], str(b["trials"]), rate, f"{100 * b['ci95'][0]:.0f}-{100 * b['ci95'][1]:.0f}"
+        )
     console.print(table)
     fails = ", ".join(f"{k} {v}" for k, v in summary["failures"].items() if v) or "none"
     console.print(f"failures: {fails}")
     lat, dur = summary["latency_ms"], summary["duration_s"]
     if lat["p50"] is not None:
-        console.print(f"decision latency p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} ms "
-                      f"(match p50 {lat['match_p50']:.3f} ms)")
+        console.print(
+            f"decision latency p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} ms "
+            f"(match p50 {lat['match_p50']:.3f} ms)"
+        )
     if dur["p50"] is not None:
-        console.print(f"task duration p50 {dur['p50']:.2f} s (demonstration {dur['demo']:.2f} s,"
-                      f" ratio p50 {dur['ratio_p50']:.2f}); {summary['trials_per_second']:.2f} "
-                      "trials/s")
+        console.print(
+            f"task duration p50 {dur['p50']:.2f} s (demonstration {dur['demo']:.2f} s,"
+            f" ratio p50 {dur['ratio_p50']:.2f}); {summary['trials_per_second']:.2f} "
+            "trials/s"
+        )

@@ -21,9 +21,13 @@ from smccli.errors import SmcError
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
-                  help="Teach a robot a task from a few demonstrations (Sensory-Motor "
-                       "Contingencies, Stefanini et al. 2024).")
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    help="Teach a robot a task from a few demonstrations (Sensory-Motor "
+    "Contingencies, Stefanini et al. 2024).",
+)
 out = Console()
 err = Console(stderr=True)
 
@@ -44,45 +48,78 @@ def scenes() -> None:
     """List the built-in scenes and their objects."""
     from smccli.scene import list_scenes
 
-    table = Table("scene", "objects", "sensors", "task")
+    table = Table("scene", "objects", "variants", "sensors", "task")
     for s in list_scenes():
-        table.add_row(s.name, ", ".join(o.name for o in s.objects),
-                      ", ".join(s.sensor_names()), s.description)
+        sensors = [f"camera {s.camera.width}x{s.camera.height} @ {s.camera.rate:g} Hz"]
+        if s.scale:
+            sensors.append(f"scale ({s.scale})")
+        variants = "; ".join(f"{v}: {', '.join(o)}" for v, o in s.variants) or "-"
+        objects = ", ".join(o.name for o in s.objects)
+        table.add_row(
+            *(escape(x) for x in (s.name, objects, variants, ", ".join(sensors), s.description))
+        )
     out.print(table)
 
 
 @app.command()
 def record(
     scene: Annotated[str, typer.Option(help="Built-in scene name or path to a scene.yaml.")],
-    operator: Annotated[OperatorKind, typer.Option(help="Who drives the robot.")] = OperatorKind.script,
-    script: Annotated[Path | None, typer.Option(help="Teleop script (YAML) for --operator script.",
-                                                dir_okay=False)] = None,
+    operator: Annotated[
+        OperatorKind, typer.Option(help="Who drives the robot.")
+    ] = OperatorKind.script,
+    script: Annotated[
+        Path | None,
+        typer.Option(help="Teleop script (YAML) for --operator script.", dir_okay=False),
+    ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the operator's noise and of the layout.")] = 0,
-    output: Annotated[Path, typer.Option("-o", "--output", help="Log to write (.mcap).")] = Path("demo.mcap"),
+    output: Annotated[Path, typer.Option("-o", "--output", help="Log to write (.mcap).")] = Path(
+        "demo.mcap"
+    ),
     force: Annotated[bool, typer.Option(help="Overwrite an existing log.")] = False,
-    randomize: Annotated[bool, typer.Option(help="Start from a random layout (else nominal).")] = False,
+    randomize: Annotated[
+        bool, typer.Option(help="Start from a random layout (else nominal).")
+    ] = False,
     realtime: Annotated[bool, typer.Option(help="Pace the script operator at real time.")] = False,
 ) -> None:
     """Record a demonstration into an MCAP log."""
-    from smccli.record import RecordConfig, record as run_record
+    from smccli.record import RecordConfig
+    from smccli.record import record as run_record
 
-    cfg = RecordConfig(scene=scene, operator=operator.value, script=script, seed=seed,
-                       output=output, force=force, randomize=randomize, realtime=realtime)
-    with Progress(TextColumn("[bold]recording[/]"), TextColumn("{task.description}"),
-                  TimeElapsedColumn(), console=err, transient=True) as progress:
+    cfg = RecordConfig(
+        scene=scene,
+        operator=operator.value,
+        script=script,
+        seed=seed,
+        output=output,
+        force=force,
+        randomize=randomize,
+        realtime=realtime,
+    )
+    with Progress(
+        TextColumn("[bold]recording[/]"),
+        TextColumn("{task.description}"),
+        TimeElapsedColumn(),
+        console=err,
+        transient=True,
+    ) as progress:
         task = progress.add_task("", total=None)
 
         def status(s) -> None:
-            progress.update(task, description=f"sim {s.t:6.2f} s  msgs {s.messages}  "
-                                              f"marks {s.marks}")
+            progress.update(
+                task, description=f"sim {s.t:6.2f} s  msgs {s.messages}  marks {s.marks}"
+            )
 
-        summary = run_record(cfg, on_status=status)
+        summary = run_record(
+            cfg, on_status=status, on_message=lambda m: progress.console.print(escape(m))
+        )
     _print_summary(summary)
 
 
 def _print_summary(summary) -> None:
-    out.print(f"[bold green]wrote[/] {summary.path}  ({summary.size_bytes / 1e6:.2f} MB, "
-              f"{summary.duration:.1f} s, {summary.fragments} fragment(s) marked)")
+    out.print(
+        f"[bold green]wrote[/] {escape(str(summary.path))}  ({summary.size_bytes / 1e6:.2f} MB, "
+        f"{summary.duration:.1f} s, {summary.fragments} fragment(s) marked)"
+    )
     table = Table("topic", "messages", "rate [Hz]")
     for topic, (count, rate) in sorted(summary.topics.items()):
         table.add_row(topic, str(count), f"{rate:.1f}")
@@ -93,17 +130,32 @@ def _print_summary(summary) -> None:
 def compile_cmd(
     logs: Annotated[list[Path], typer.Argument(help="Demonstration logs (.mcap).")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Tree file.")] = Path("tree.json"),
-    segment: Annotated[SegmentChoice, typer.Option(help="Where fragment boundaries come from.")] = SegmentChoice.markers,
-    rebuild: Annotated[bool, typer.Option(help="Start a new tree instead of adding to it.")] = False,
-    set_: Annotated[list[str] | None, typer.Option("--set", help="Override a parameter: KEY=VALUE (e.g. t_hp=0.12, dmp.n_basis=50).")] = None,
+    segment: Annotated[
+        SegmentChoice, typer.Option(help="Where fragment boundaries come from.")
+    ] = SegmentChoice.markers,
+    rebuild: Annotated[
+        bool, typer.Option(help="Start a new tree instead of adding to it.")
+    ] = False,
+    set_: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--set", help="Override a parameter: KEY=VALUE (e.g. t_hp=0.12, dmp.n_basis=50)."
+        ),
+    ] = None,
 ) -> None:
     """Segment logs, extract SMCs and merge them into a versioned tree.json."""
     from smccli.compile import compile_logs
     from smccli.segmentation import SegmentMode
     from smccli.tree_view import print_tree
 
-    with Progress(TextColumn("[bold]compiling[/]"), BarColumn(), MofNCompleteColumn(),
-                  TextColumn("{task.description}"), console=err, transient=True) as progress:
+    with Progress(
+        TextColumn("[bold]compiling[/]"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.description}"),
+        console=err,
+        transient=True,
+    ) as progress:
         task = progress.add_task("", total=len(logs))
         seen: set[Path] = set()
 
@@ -114,55 +166,87 @@ def compile_cmd(
                 seen.add(path)
             progress.update(task, description=f"{path.name}: {stage}")
 
-        result = compile_logs(logs, output, segment_mode=SegmentMode(segment.value),
-                              rebuild=rebuild, overrides=set_ or [], on_progress=on_progress,
-                              on_warning=lambda m: err.print(f"[yellow]warning:[/] {m}"))
+        result = compile_logs(
+            logs,
+            output,
+            segment_mode=SegmentMode(segment.value),
+            rebuild=rebuild,
+            overrides=set_ or [],
+            on_progress=on_progress,
+            on_warning=lambda m: err.print(f"[yellow]warning:[/] {escape(m)}"),
+        )
         progress.update(task, completed=len(logs))
     for p in result.skipped:
-        err.print(f"skipped {p} (already in the tree)")
+        err.print(f"skipped {escape(str(p))} (already in the tree)")
     state = f"version {result.tree.version}" + ("" if result.changed else " (unchanged)")
-    out.print(f"[bold green]{output}[/]: {state}, {len(result.tree.nodes)} nodes, "
-              f"{len(result.tree.edges)} edges")
+    out.print(
+        f"[bold green]{output}[/]: {state}, {len(result.tree.nodes)} nodes, "
+        f"{len(result.tree.edges)} edges"
+    )
     print_tree(result.tree, out)
 
 
 @app.command()
 def replay(
     tree: Annotated[Path, typer.Argument(help="Tree file (tree.json).")],
-    scene: Annotated[str | None, typer.Option(help="Scene name or path; default: the tree's.")] = None,
+    scene: Annotated[
+        str | None, typer.Option(help="Scene name or path; default: the tree's.")
+    ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the layout (and of a campaign).")] = 0,
-    layout: Annotated[Path | None, typer.Option(help="Layout file (YAML/JSON: object -> [x, y, z, yaw]).", dir_okay=False)] = None,
-    output: Annotated[Path | None, typer.Option("-o", "--output", help="Replay log (.mcap).")] = None,
+    layout: Annotated[
+        Path | None,
+        typer.Option(help="Layout file (YAML/JSON: object -> [x, y, z, yaw]).", dir_okay=False),
+    ] = None,
+    output: Annotated[
+        Path | None, typer.Option("-o", "--output", help="Replay log (.mcap).")
+    ] = None,
     report: Annotated[Path | None, typer.Option(help="Report (JSON).")] = None,
     trials: Annotated[int, typer.Option(help="Run a campaign of N randomised layouts.")] = 0,
-    workers: Annotated[int, typer.Option(help="Processes for a campaign (default: all cores).")] = 0,
-    min_success: Annotated[float | None, typer.Option(help="Exit 1 if the campaign's success rate is below this.")] = None,
+    workers: Annotated[
+        int, typer.Option(help="Processes for a campaign (default: all cores).")
+    ] = 0,
+    min_success: Annotated[
+        float | None, typer.Option(help="Exit 1 if the campaign's success rate is below this.")
+    ] = None,
     force: Annotated[bool, typer.Option(help="Overwrite existing outputs.")] = False,
 ) -> None:
     """Execute the tree autonomously in simulation: one episode or a campaign."""
     from smccli import replay as rp
 
     if trials > 0:
-        with Progress(TextColumn("[bold]campaign[/]"), BarColumn(), MofNCompleteColumn(),
-                      TextColumn("{task.description}"), TimeElapsedColumn(), console=err,
-                      transient=True) as progress:
+        with Progress(
+            TextColumn("[bold]campaign[/]"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("{task.description}"),
+            TimeElapsedColumn(),
+            console=err,
+            transient=True,
+        ) as progress:
             task = progress.add_task("", total=trials)
 
             def on_trial(done: int, successes: int) -> None:
-                progress.update(task, completed=done,
-                                description=f"{successes}/{done} succeeded")
+                progress.update(task, completed=done, description=f"{successes}/{done} succeeded")
 
-            summary = rp.run_campaign(tree, scene=scene, trials=trials, seed=seed,
-                                      workers=workers or (os.cpu_count() or 1),
-                                      report=report, on_trial=on_trial)
+            summary = rp.run_campaign(
+                tree,
+                scene=scene,
+                trials=trials,
+                seed=seed,
+                workers=workers or (os.cpu_count() or 1),
+                report=report,
+                on_trial=on_trial,
+            )
         rp.print_campaign(summary, out)
         if min_success is not None and summary["success_rate"] < min_success:
-            err.print(f"success rate {summary['success_rate']:.3f} below --min-success "
-                      f"{min_success}")
+            err.print(
+                f"success rate {summary['success_rate']:.3f} below --min-success {min_success}"
+            )
             raise typer.Exit(1)
         return
-    result = rp.run_episode(tree, scene=scene, seed=seed, layout=layout, output=output,
-                            report=report, force=force)
+    result = rp.run_episode(
+        tree, scene=scene, seed=seed, layout=layout, output=output, report=report, force=force
+    )
     rp.print_episode(result, out)
     if result.outcome != "success":
         raise typer.Exit(1)
@@ -184,8 +268,16 @@ def inspect(
         raise SmcError("choose one of --save, --spawn, --serve")
     if not (spawn or serve) and save is None:
         save = tree.with_suffix(".rrd")
-    ins.inspect(tree, logs or [], save=save, spawn=spawn, serve=serve, port=port,
-                console=out, on_warning=lambda m: err.print(f"[yellow]warning:[/] {escape(m)}"))
+    ins.inspect(
+        tree,
+        logs or [],
+        save=save,
+        spawn=spawn,
+        serve=serve,
+        port=port,
+        console=out,
+        on_warning=lambda m: err.print(f"[yellow]warning:[/] {escape(m)}"),
+    )
 
 
 def main() -> None:

@@ -7,8 +7,9 @@ import colorsys
 import numpy as np
 
 
-def dominant_rgb(histogram: np.ndarray, hue_bins: int = 12, sat_bins: int = 3,
-                 val_bins: int = 3) -> tuple[int, int, int]:
+def dominant_rgb(
+    histogram: np.ndarray, hue_bins: int = 12, sat_bins: int = 3, val_bins: int = 3
+) -> tuple[int, int, int]:
     """RGB of a cluster histogram's heaviest bin (layout: :mod:`smccli.perception.histogram`).
 
     Chromatic bins [hue x saturation] come first, then the achromatic brightness bins.
@@ -36,8 +37,16 @@ def colour_name(rgb: tuple[int, int, int]) -> str:
     if s < 0.25:
         return "white" if v > 0.75 else "grey" if v > 0.3 else "black"
     deg = h * 360
-    for limit, name in ((15, "red"), (45, "orange"), (70, "yellow"), (165, "green"),
-                        (195, "cyan"), (255, "blue"), (290, "purple"), (340, "pink")):
+    for limit, name in (
+        (15, "red"),
+        (45, "orange"),
+        (70, "yellow"),
+        (165, "green"),
+        (195, "cyan"),
+        (255, "blue"),
+        (290, "purple"),
+        (340, "pink"),
+    ):
         if deg < limit:
             return name
     return "red"

@@ -30,8 +30,14 @@ from smccli.smc import Action, SalientPerceptions, Smc, Source, goal_in_object
 from smccli.tree import Tree, insert_chain, load_tree, save_tree
 
 #: Topics every arm log must hold for compile.
-REQUIRED_TOPICS = {"/teleop/command", "/robot/poi", "/robot/joint_states", "/camera/color",
-                   "/camera/depth", "/camera/calibration"}
+REQUIRED_TOPICS = {
+    "/teleop/command",
+    "/robot/poi",
+    "/robot/joint_states",
+    "/camera/color",
+    "/camera/depth",
+    "/camera/calibration",
+}
 #: Topics compile reads; the ground truth is deliberately not among them.
 READ_TOPICS = REQUIRED_TOPICS | {"/tf", "/scale/weight", "/saliency"}
 
@@ -88,15 +94,21 @@ def _finger_speed(log: Log) -> tuple[np.ndarray, np.ndarray]:
     return t, vel
 
 
-def fragments(log: Log, params: SmcParams,
-              mode: SegmentMode = SegmentMode.markers) -> list[Fragment]:
+def fragments(
+    log: Log, params: SmcParams, mode: SegmentMode = SegmentMode.markers
+) -> list[Fragment]:
     """Temporal saliency (3.1) of a log: its fragments, as compile cuts them."""
     t_end = float(log.poi_t[-1]) if len(log.poi_t) else 0.0
     t_f, v_f = _finger_speed(log)
     marks = tuple(m.t for m in log.marks if m.source == "operator")
     trace = trace_from_commands(log.commands, t_f, v_f, log.weight_t, log.weight, marks, t_end)
-    return segment(trace, mode, snap_window=params.snap_window,
-                   min_fragment=params.min_fragment, auto_gap=params.auto_gap)
+    return segment(
+        trace,
+        mode,
+        snap_window=params.snap_window,
+        min_fragment=params.min_fragment,
+        auto_gap=params.auto_gap,
+    )
 
 
 def extract_chain(log: Log, params: SmcParams, mode: SegmentMode) -> Chain:
@@ -104,8 +116,9 @@ def extract_chain(log: Log, params: SmcParams, mode: SegmentMode) -> Chain:
     warnings: list[str] = []
     name = log.path.name
     if mode is SegmentMode.markers and not any(m.source == "operator" for m in log.marks):
-        warnings.append(f"{name}: no saliency marks; the whole log is one fragment "
-                        "(try --segment auto)")
+        warnings.append(
+            f"{name}: no saliency marks; the whole log is one fragment (try --segment auto)"
+        )
     frags = fragments(log, params, mode)
     robot = RobotModel.from_log(log)
     has_scale = len(log.weight) > 0
@@ -121,26 +134,39 @@ def extract_chain(log: Log, params: SmcParams, mode: SegmentMode) -> Chain:
         weight = None
         if has_scale:
             sel = (log.weight_t >= frag.t0 - 1e-6) & (log.weight_t <= frag.t0 + 0.15)
-            w = log.weight[sel] if sel.any() else log.weight[[int(np.argmin(
-                np.abs(log.weight_t - frag.t0)))]]
+            w = (
+                log.weight[sel]
+                if sel.any()
+                else log.weight[[int(np.argmin(np.abs(log.weight_t - frag.t0)))]]
+            )
             weight = float(np.median(w))
         action = _action(log, frag, cluster, params)
         if cluster is None and action.event != "none":
-            warnings.append(f"{name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends "
-                            f"with no object within {params.epsilon} m of the POI; its goal "
-                            "is stored in the world frame")
-        smcs.append(Smc(perception=SalientPerceptions(cluster=cluster, weight=weight),
-                        action=action))
-    return Chain(log=log.path, sha256=log.sha256, fragments=tuple(frags),
-                 smcs=tuple(smcs), warnings=tuple(warnings))
+            warnings.append(
+                f"{name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends "
+                f"with no object within {params.epsilon} m of the POI; its goal "
+                "is stored in the world frame"
+            )
+        smcs.append(
+            Smc(perception=SalientPerceptions(cluster=cluster, weight=weight), action=action)
+        )
+    return Chain(
+        log=log.path,
+        sha256=log.sha256,
+        fragments=tuple(frags),
+        smcs=tuple(smcs),
+        warnings=tuple(warnings),
+    )
 
 
 def _action(log: Log, frag: Fragment, cluster, params: SmcParams) -> Action:
     """Action saliency (3.4): the commanded POI path over the fragment as a DMP."""
     cmds = [c for c in log.commands if frag.t0 - 1e-6 <= c.t <= frag.t1 + 1e-6]
     if len(cmds) < 3:
-        raise LogError(f"{log.path.name}: fragment {frag.t0:.2f}-{frag.t1:.2f} s holds fewer "
-                       "than 3 operator commands")
+        raise LogError(
+            f"{log.path.name}: fragment {frag.t0:.2f}-{frag.t1:.2f} s holds fewer "
+            "than 3 operator commands"
+        )
     t = np.array([c.t for c in cmds]) - cmds[0].t
     path = np.array([c.target for c in cmds], dtype=float)
     path[:, 3] = np.unwrap(path[:, 3])
@@ -155,8 +181,14 @@ def _action(log: Log, frag: Fragment, cluster, params: SmcParams) -> Action:
     switches = np.nonzero(np.abs(np.diff(grip)) > 0.25)[0]
     # The last switch of the gripper command, as a phase of the fragment (1 = at its end).
     phase = float(t[switches[-1] + 1] / t[-1]) if len(switches) and t[-1] > 0 else 1.0
-    return Action(dmp=dmp, goal_frame=frame, goal=goal, gripper_start=float(grip[0]),
-                  gripper_end=float(grip[-1]), gripper_phase=min(max(phase, 1e-3), 1.0))
+    return Action(
+        dmp=dmp,
+        goal_frame=frame,
+        goal=goal,
+        gripper_start=float(grip[0]),
+        gripper_end=float(grip[-1]),
+        gripper_phase=min(max(phase, 1e-3), 1.0),
+    )
 
 
 def _required_topics(log: Log) -> set[str]:
@@ -193,14 +225,18 @@ def compile_logs(
             tree = load_tree(out)
             wanted = with_overrides(tree.params, list(overrides))
             if params_to_dict(wanted) != params_to_dict(tree.params):
-                raise TreeError(f"{out}: --set {' '.join(overrides)} differs from the tree's "
-                                "parameters; use --rebuild to start afresh")
+                raise TreeError(
+                    f"{out}: --set {' '.join(overrides)} differs from the tree's "
+                    "parameters; use --rebuild to start afresh"
+                )
         else:
             # A rebuild starts a new tree but keeps the version growing and the history.
             old = load_tree(out) if (out.exists() and rebuild) else None
-            tree = Tree(params=with_overrides(SmcParams(), list(overrides)),
-                        version=old.version if old else 0,
-                        history=old.history if old else ())
+            tree = Tree(
+                params=with_overrides(SmcParams(), list(overrides)),
+                version=old.version if old else 0,
+                history=old.history if old else (),
+            )
         known = tree.log_digests()
         added: list[Chain] = []
         skipped: list[Path] = []
@@ -209,29 +245,40 @@ def compile_logs(
             if on_progress:
                 on_progress(path, "reading")
             log = read_log(path, topics=READ_TOPICS, on_warning=warn)
-            missing = sorted(_required_topics(log) - {t for t, n in log.topic_counts.items()
-                                                      if n > 0})
+            missing = sorted(
+                _required_topics(log) - {t for t, n in log.topic_counts.items() if n > 0}
+            )
             if missing:
-                raise LogError(f"{path}: topic {missing[0]} missing (scene "
-                               f"{log.metadata.get('scene', '?')} needs it)")
+                raise LogError(
+                    f"{path}: topic {missing[0]} missing (scene "
+                    f"{log.metadata.get('scene', '?')} needs it)"
+                )
             if log.sha256 in known or any(c.sha256 == log.sha256 for c in added):
                 skipped.append(path)
                 continue
             if tree.scene and log.metadata.get("scene") not in (None, tree.scene.get("name")):
-                raise LogError(f"{path}: scene {log.metadata.get('scene')!r} differs from the "
-                               f"tree's scene {tree.scene.get('name')!r}")
+                raise LogError(
+                    f"{path}: scene {log.metadata.get('scene')!r} differs from the "
+                    f"tree's scene {tree.scene.get('name')!r}"
+                )
             if on_progress:
                 on_progress(path, "extracting")
             chain = extract_chain(log, tree.params, segment_mode)
             for w in chain.warnings:
                 warn(w)
-            sources = [Source(log=path.name, sha256=log.sha256, t0=f.t0, t1=f.t1)
-                       for f in chain.fragments]
+            sources = [
+                Source(log=path.name, sha256=log.sha256, t0=f.t0, t1=f.t1) for f in chain.fragments
+            ]
             tree = insert_chain(tree, chain.smcs, sources)
             if not tree.scene:
-                tree = replace(tree, scene={"name": log.metadata.get("scene", ""),
-                                            "digest": log.metadata.get("scene_digest", ""),
-                                            "log": log.sha256})
+                tree = replace(
+                    tree,
+                    scene={
+                        "name": log.metadata.get("scene", ""),
+                        "digest": log.metadata.get("scene_digest", ""),
+                        "log": log.sha256,
+                    },
+                )
             added.append(chain)
         if not added:
             return CompileResult(tree=tree, added=(), skipped=tuple(skipped), changed=False)
@@ -239,8 +286,9 @@ def compile_logs(
             "version": tree.version + 1,
             "time": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
             "smc_version": __version__,
-            "logs": [{"name": c.log.name, "sha256": c.sha256, "fragments": len(c.smcs)}
-                     for c in added],
+            "logs": [
+                {"name": c.log.name, "sha256": c.sha256, "fragments": len(c.smcs)} for c in added
+            ],
         }
         tree = replace(tree, version=tree.version + 1, history=(*tree.history, entry))
         save_tree(tree, out)

@@ -53,8 +53,10 @@ def d_a(a: Action, b: Action, params: SmcParams) -> float:
 
 def c_f(a: Smc, b: Smc, params: SmcParams) -> bool:
     """Fragment contingency C_F (eq. 31)."""
-    return d_a(a.action, b.action, params) < params.t_ha and \
-        d_p(a.perception, b.perception, params) < params.t_hp
+    return (
+        d_a(a.action, b.action, params) < params.t_ha
+        and d_p(a.perception, b.perception, params) < params.t_hp
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -69,8 +71,9 @@ class Match:
     """C_Now: d_p < T_hP (eq. 36)."""
 
 
-def match_context(stored: SalientPerceptions, clusters: Sequence[Cluster],
-                  weight: float | None, params: SmcParams) -> Match:
+def match_context(
+    stored: SalientPerceptions, clusters: Sequence[Cluster], weight: float | None, params: SmcParams
+) -> Match:
     """C_Now of a context (clusters seen now, scale reading now) against a stored SMC.
 
     The context's salient localized perception is the cluster nearest the stored one in
@@ -97,10 +100,13 @@ def _mean_cluster(a: Cluster, b: Cluster, wa: float, wb: float) -> Cluster:
     hist = hist / max(float(hist.sum()), 1e-12)
     period = a.yaw_period if a.yaw_period > 0 else 2 * math.pi
     yaw = a.yaw + wb / (wa + wb) * wrap_angle(b.yaw - a.yaw, period)
-    return dataclasses.replace(a, histogram=hist,
-                    extents=(wa * a.extents + wb * b.extents) / (wa + wb),
-                    centroid=(wa * a.centroid + wb * b.centroid) / (wa + wb),
-                    yaw=float(yaw))
+    return dataclasses.replace(
+        a,
+        histogram=hist,
+        extents=(wa * a.extents + wb * b.extents) / (wa + wb),
+        centroid=(wa * a.centroid + wb * b.centroid) / (wa + wb),
+        yaw=float(yaw),
+    )
 
 
 def merge(a: Smc, b: Smc, support_a: int, support_b: int = 1) -> Smc:

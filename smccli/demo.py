@@ -27,12 +27,22 @@ def main() -> int:
     OUT.mkdir(parents=True, exist_ok=True)
     demo, tree = OUT / "demo.mcap", OUT / "tree.json"
     replay, report = OUT / "replay.mcap", OUT / "report.json"
-    _smc("record", "--scene", "bench_pick", "--operator", "script", "--script",
-         str(ROOT / "sample_logs" / "bench_pick" / "demo.yaml"), "--seed", "0", "-o", str(demo),
-         "--force")
+    _smc(
+        "record",
+        "--scene",
+        "bench_pick",
+        "--operator",
+        "script",
+        "--script",
+        str(ROOT / "sample_logs" / "bench_pick" / "demo.yaml"),
+        "--seed",
+        "0",
+        "-o",
+        str(demo),
+        "--force",
+    )
     _smc("compile", str(demo), "-o", str(tree), "--rebuild")
-    _smc("replay", str(tree), "--seed", "7", "-o", str(replay), "--report", str(report),
-         "--force")
+    _smc("replay", str(tree), "--seed", "7", "-o", str(replay), "--report", str(report), "--force")
     _smc("inspect", str(tree), str(demo), str(replay), "--save", str(OUT / "demo.rrd"))
     print(f"\ndone: {OUT} (open demo.rrd with `rerun {OUT / 'demo.rrd'}`)")
     return 0

@@ -95,8 +95,9 @@ class _Frame:
     """Start-to-goal distance of the positions, floored at ``min_scale`` [m]."""
 
 
-def _frame(start: np.ndarray, goal: np.ndarray, n_pos: int, p: DmpParams,
-           fallback_heading: float = 0.0) -> _Frame:
+def _frame(
+    start: np.ndarray, goal: np.ndarray, n_pos: int, p: DmpParams, fallback_heading: float = 0.0
+) -> _Frame:
     d = goal[:n_pos] - start[:n_pos]
     heading = fallback_heading
     # A heading needs a horizontal displacement; for vertical or in-place moves keep the
@@ -167,8 +168,9 @@ def _integrate(weights: np.ndarray, p: DmpParams, s_out: np.ndarray) -> np.ndarr
     return out
 
 
-def fit(t: np.ndarray, y: np.ndarray, params: DmpParams = DmpParams(), *,
-        n_pos: int | None = None) -> Dmp:
+def fit(
+    t: np.ndarray, y: np.ndarray, params: DmpParams = DmpParams(), *, n_pos: int | None = None
+) -> Dmp:
     """Fit a DMP to a demonstration (eq. 28): ``t`` shape (T,) [s], ``y`` shape (T, n_dims).
 
     ``t`` may be non-uniform; the path is resampled every ``params.dt``. ``n_pos`` leading
@@ -176,8 +178,9 @@ def fit(t: np.ndarray, y: np.ndarray, params: DmpParams = DmpParams(), *,
     """
     t, y = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
     if t.ndim != 1 or y.ndim != 2 or len(t) != len(y) or len(t) < 2:
-        raise ValueError(f"fit: expected t (T,) and y (T, n_dims) with T >= 2, got {t.shape}, "
-                         f"{y.shape}")
+        raise ValueError(
+            f"fit: expected t (T,) and y (T, n_dims) with T >= 2, got {t.shape}, {y.shape}"
+        )
     n_pos = y.shape[1] - 1 if n_pos is None else n_pos
     if not 0 <= n_pos <= y.shape[1]:
         raise ValueError(f"fit: n_pos must be in [0, {y.shape[1]}], got {n_pos}")
@@ -204,9 +207,14 @@ def fit(t: np.ndarray, y: np.ndarray, params: DmpParams = DmpParams(), *,
     return Dmp(w.T.copy(), start.copy(), goal.copy(), duration, n_pos, params)
 
 
-def rollout(dmp: Dmp, *, start: np.ndarray | None = None, goal: np.ndarray | None = None,
-            duration: float | None = None,
-            n_steps: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+def rollout(
+    dmp: Dmp,
+    *,
+    start: np.ndarray | None = None,
+    goal: np.ndarray | None = None,
+    duration: float | None = None,
+    n_steps: int | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Roll the DMP out from ``start`` to ``goal`` (eq. 27): times (N,) [s], POI (N, n_dims).
 
     Defaults are the demonstration's start, goal and duration and one step per ``dt``.
@@ -216,13 +224,16 @@ def rollout(dmp: Dmp, *, start: np.ndarray | None = None, goal: np.ndarray | Non
     goal = dmp.goal if goal is None else np.asarray(goal, dtype=float)
     duration = dmp.duration if duration is None else float(duration)
     if start.shape != (dmp.n_dims,) or goal.shape != (dmp.n_dims,):
-        raise ValueError(f"rollout: expected start and goal of shape ({dmp.n_dims},), got "
-                         f"{start.shape}, {goal.shape}")
+        raise ValueError(
+            f"rollout: expected start and goal of shape ({dmp.n_dims},), got "
+            f"{start.shape}, {goal.shape}"
+        )
     if n_steps is None:
         n_steps = max(int(round(duration / p.dt)), 2) + 1
     if n_steps < 2 or not duration > 0:
-        raise ValueError(f"rollout: expected n_steps >= 2 and duration > 0, got {n_steps}, "
-                         f"{duration}")
+        raise ValueError(
+            f"rollout: expected n_steps >= 2 and duration > 0, got {n_steps}, {duration}"
+        )
     fr_demo = _frame(dmp.start, dmp.goal, dmp.n_pos, p)
     fr = _frame(start, goal, dmp.n_pos, p, fallback_heading=fr_demo.heading)
     goal_c = _to_canonical(goal[None], start, fr, dmp.n_pos)[0]
@@ -259,8 +270,9 @@ def shape_distance(a: Dmp, b: Dmp, n_samples: int = 100) -> float:
     D_A) unless the POI has no positions, in which case the result is in [rad].
     """
     if a.n_dims != b.n_dims or a.n_pos != b.n_pos:
-        raise ValueError(f"shape_distance: POI layouts differ ({a.n_dims}, {a.n_pos}) vs "
-                         f"({b.n_dims}, {b.n_pos})")
+        raise ValueError(
+            f"shape_distance: POI layouts differ ({a.n_dims}, {a.n_pos}) vs ({b.n_dims}, {b.n_pos})"
+        )
     dims = slice(0, a.n_pos) if a.n_pos else slice(0, a.n_dims)
     cs, scales = [], []
     for d in (a, b):
@@ -279,28 +291,39 @@ def merge(dmps: Sequence[Dmp], weights: Sequence[float]) -> Dmp:
     weighted mean of the inputs' canonical paths.
     """
     if not dmps or len(dmps) != len(weights) or min(weights) <= 0:
-        raise ValueError(f"merge: expected as many positive weights as DMPs (>= 1), got "
-                         f"{len(dmps)} DMPs, weights {list(weights)}")
+        raise ValueError(
+            f"merge: expected as many positive weights as DMPs (>= 1), got "
+            f"{len(dmps)} DMPs, weights {list(weights)}"
+        )
     first = dmps[0]
     for d in dmps[1:]:
-        if (d.weights.shape, d.n_pos, d.params) != (first.weights.shape, first.n_pos,
-                                                     first.params):
+        if (d.weights.shape, d.n_pos, d.params) != (first.weights.shape, first.n_pos, first.params):
             raise ValueError("merge: DMPs differ in shape, n_pos or params")
     w = np.asarray(weights, dtype=float) / float(np.sum(weights))
 
     def mean(values: list[np.ndarray]) -> np.ndarray:
         return np.tensordot(w, np.stack(values), axes=1)
 
-    return Dmp(mean([d.weights for d in dmps]), mean([d.start for d in dmps]),
-               mean([d.goal for d in dmps]), float(np.dot(w, [d.duration for d in dmps])),
-               first.n_pos, first.params)
+    return Dmp(
+        mean([d.weights for d in dmps]),
+        mean([d.start for d in dmps]),
+        mean([d.goal for d in dmps]),
+        float(np.dot(w, [d.duration for d in dmps])),
+        first.n_pos,
+        first.params,
+    )
 
 
 def to_dict(dmp: Dmp) -> dict:
     """JSON-ready dict of plain lists and floats; ``from_dict(to_dict(d))`` is exact."""
-    return {"weights": dmp.weights.tolist(), "start": dmp.start.tolist(),
-            "goal": dmp.goal.tolist(), "duration": float(dmp.duration), "n_pos": dmp.n_pos,
-            "params": asdict(dmp.params)}
+    return {
+        "weights": dmp.weights.tolist(),
+        "start": dmp.start.tolist(),
+        "goal": dmp.goal.tolist(),
+        "duration": float(dmp.duration),
+        "n_pos": dmp.n_pos,
+        "params": asdict(dmp.params),
+    }
 
 
 def from_dict(d: dict) -> Dmp:
@@ -316,9 +339,16 @@ def from_dict(d: dict) -> Dmp:
     except (TypeError, ValueError) as exc:
         raise TreeError(f"DMP entry: invalid values ({exc})") from exc
     n_pos = int(d["n_pos"])
-    if (w.ndim != 2 or w.shape[1] != params.n_basis or start.shape != (w.shape[0],)
-            or goal.shape != start.shape or not 0 <= n_pos <= w.shape[0]):
-        raise TreeError(f"DMP entry: expected weights (n_dims, {params.n_basis}), start and goal "
-                        f"(n_dims,), 0 <= n_pos <= n_dims; got {w.shape}, {start.shape}, "
-                        f"{goal.shape}, n_pos {n_pos}")
+    if (
+        w.ndim != 2
+        or w.shape[1] != params.n_basis
+        or start.shape != (w.shape[0],)
+        or goal.shape != start.shape
+        or not 0 <= n_pos <= w.shape[0]
+    ):
+        raise TreeError(
+            f"DMP entry: expected weights (n_dims, {params.n_basis}), start and goal "
+            f"(n_dims,), 0 <= n_pos <= n_dims; got {w.shape}, {start.shape}, "
+            f"{goal.shape}, n_pos {n_pos}"
+        )
     return Dmp(w, start, goal, float(d["duration"]), n_pos, params)

@@ -49,8 +49,18 @@ TIMELINE = "time"
 MAX_CLOUD_POINTS = 40_000
 """Point clouds are subsampled to at most this many points (viewer and file size)."""
 
-_PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
-            (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207)]
+_PALETTE = [
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (127, 127, 127),
+    (188, 189, 34),
+    (23, 190, 207),
+]
 _HIGHLIGHT = (255, 215, 0)
 _NODE = (90, 90, 90)
 _ROOT = (20, 20, 20)
@@ -99,7 +109,9 @@ def inspect(
         if on_warning is not None:
             on_warning(msg)
         elif console is not None:
-            console.print(f"[yellow]warning:[/] {msg}", highlight=False)
+            from rich.markup import escape
+
+            console.print(f"[yellow]warning:[/] {escape(msg)}", highlight=False)
 
     tree = load_tree(Path(tree_path))
     from smccli.logs import read_log
@@ -117,8 +129,11 @@ def inspect(
     assert save is not None
     ids = write_rrd(tree, loaded, Path(save), tree_name=Path(tree_path).name, warn=warn)
     if console is not None:
-        console.print(f"[bold green]wrote[/] {save}  ({len(ids)} recording(s): "
-                      f"{', '.join(ids)}; open with `rerun {save}`)", highlight=False)
+        console.print(
+            f"[bold green]wrote[/] {save}  ({len(ids)} recording(s): "
+            f"{', '.join(ids)}; open with `rerun {save}`)",
+            highlight=False,
+        )
     return InspectResult(tuple(ids), Path(save), None, tuple(warnings))
 
 
@@ -144,8 +159,14 @@ def _fill(rec: Any, tree: Tree, log: Any, warn: Callable[[str], None]) -> None:
         log_log(rec, log, tree, warn=warn)
 
 
-def write_rrd(tree: Tree, logs: Sequence[Any], out: Path, *, tree_name: str = "tree.json",
-              warn: Callable[[str], None] = lambda m: None) -> list[str]:
+def write_rrd(
+    tree: Tree,
+    logs: Sequence[Any],
+    out: Path,
+    *,
+    tree_name: str = "tree.json",
+    warn: Callable[[str], None] = lambda m: None,
+) -> list[str]:
     """Write one .rrd holding a recording per log (the tree in each); returns their ids."""
     import rerun as rr
 
@@ -173,8 +194,11 @@ def write_rrd(tree: Tree, logs: Sequence[Any], out: Path, *, tree_name: str = "t
         else:
             # A Python stream writes one recording per file (files with footers cannot be
             # concatenated); the rerun binary merges them and keeps the recordings apart.
-            proc = subprocess.run([rerun_binary(), "rrd", "merge", *map(str, parts), "-o",
-                                   str(staged)], capture_output=True, text=True)
+            proc = subprocess.run(
+                [rerun_binary(), "rrd", "merge", *map(str, parts), "-o", str(staged)],
+                capture_output=True,
+                text=True,
+            )
             if proc.returncode != 0 or not staged.is_file():
                 last = (proc.stderr.strip().splitlines() or ["no output"])[-1]
                 raise SmcError(f"{out}: rerun rrd merge failed ({last})")
@@ -182,8 +206,13 @@ def write_rrd(tree: Tree, logs: Sequence[Any], out: Path, *, tree_name: str = "t
     return [rid for rid, _ in plan]
 
 
-def spawn_viewer(tree: Tree, logs: Sequence[Any], *, tree_name: str = "tree.json",
-                 warn: Callable[[str], None] = lambda m: None) -> list[str]:
+def spawn_viewer(
+    tree: Tree,
+    logs: Sequence[Any],
+    *,
+    tree_name: str = "tree.json",
+    warn: Callable[[str], None] = lambda m: None,
+) -> list[str]:
     """Send the recordings to a native viewer (spawned if none listens on 9876)."""
     import rerun as rr
 
@@ -194,8 +223,9 @@ def spawn_viewer(tree: Tree, logs: Sequence[Any], *, tree_name: str = "tree.json
         try:
             rec.spawn(default_blueprint=bp)
         except Exception as exc:  # no display, no viewer binary
-            raise SmcError(f"--spawn: cannot start Rerun's viewer ({exc}); use --save or "
-                           "--serve") from None
+            raise SmcError(
+                f"--spawn: cannot start Rerun's viewer ({exc}); use --save or --serve"
+            ) from None
         rec.send_recording_name(rid)
         _fill(rec, tree, log, warn)
         rec.flush()
@@ -251,8 +281,14 @@ def _stop(proc: subprocess.Popen[bytes]) -> None:
             continue
 
 
-def serve_rrd(rrd: Path, *, port: int, console: Any = None, ready_timeout: float = 30.0,
-              until: Callable[[], bool] | None = None) -> str:
+def serve_rrd(
+    rrd: Path,
+    *,
+    port: int,
+    console: Any = None,
+    ready_timeout: float = 30.0,
+    until: Callable[[], bool] | None = None,
+) -> str:
     """Serve ``rrd`` with Rerun's web viewer on 127.0.0.1:``port`` until Ctrl-C (or ``until()``).
 
     Prints the address; on Ctrl-C stops the viewer process (and its group) it started.
@@ -262,35 +298,55 @@ def serve_rrd(rrd: Path, *, port: int, console: Any = None, ready_timeout: float
     if _port_taken(port):
         raise SmcError(f"--port {port}: 127.0.0.1:{port} is already in use")
     grpc = _free_port()
-    cmd = [rerun_binary(), "--serve-web", "--bind", "127.0.0.1", "--port", str(grpc),
-           "--web-viewer-port", str(port), str(rrd)]
+    cmd = [
+        rerun_binary(),
+        "--serve-web",
+        "--bind",
+        "127.0.0.1",
+        "--port",
+        str(grpc),
+        "--web-viewer-port",
+        str(port),
+        str(rrd),
+    ]
     log_path = Path(rrd).with_suffix(".viewer.log")
     # Ctrl-C must reach us: a shell's `cmd &` may start us with SIGINT ignored.
     old = signal.signal(signal.SIGINT, signal.default_int_handler)
     with open(log_path, "wb") as viewer_log:
-        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=viewer_log,
-                                stderr=subprocess.STDOUT, start_new_session=True)
+        proc = subprocess.Popen(
+            cmd,
+            stdin=subprocess.DEVNULL,
+            stdout=viewer_log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
         try:
             url = f"http://127.0.0.1:{port}"
             deadline = time.monotonic() + ready_timeout
             while True:
                 if proc.poll() is not None:
                     tail = log_path.read_text(errors="replace").strip().splitlines()
-                    raise SmcError(f"rerun web viewer exited with code {proc.returncode}"
-                                   f" ({tail[-1] if tail else 'no output'})")
+                    raise SmcError(
+                        f"rerun web viewer exited with code {proc.returncode}"
+                        f" ({tail[-1] if tail else 'no output'})"
+                    )
                 try:
                     with urllib.request.urlopen(url, timeout=1.0):
                         break
                 except OSError:
                     if time.monotonic() > deadline:
-                        raise SmcError(f"rerun web viewer did not answer on {url} within "
-                                       f"{ready_timeout:.0f} s") from None
+                        raise SmcError(
+                            f"rerun web viewer did not answer on {url} within {ready_timeout:.0f} s"
+                        ) from None
                     time.sleep(0.2)
             proxy = urllib.parse.quote(f"rerun+http://127.0.0.1:{grpc}/proxy", safe="")
             full = f"{url}/?url={proxy}"
             if console is not None:
-                console.print(f"serving the Rerun web viewer at {full}  (Ctrl-C to stop)",
-                              highlight=False, soft_wrap=True)
+                console.print(
+                    f"serving the Rerun web viewer at {full}  (Ctrl-C to stop)",
+                    highlight=False,
+                    soft_wrap=True,
+                )
             else:
                 print(f"serving the Rerun web viewer at {full}  (Ctrl-C to stop)", flush=True)
             while proc.poll() is None and not (until is not None and until()):
@@ -324,10 +380,12 @@ def blueprint() -> Any:
             rrb.Vertical(
                 rrb.Spatial3DView(origin="/world", name="world"),
                 rrb.Horizontal(
-                    rrb.Spatial2DView(origin="/world/camera", contents="$origin/image",
-                                      name="camera"),
-                    rrb.Spatial2DView(origin="/world/camera", contents="$origin/depth",
-                                      name="depth"),
+                    rrb.Spatial2DView(
+                        origin="/world/camera", contents="$origin/image", name="camera"
+                    ),
+                    rrb.Spatial2DView(
+                        origin="/world/camera", contents="$origin/depth", name="depth"
+                    ),
                     rrb.Tabs(
                         rrb.TextLogView(origin="/events", name="events"),
                         rrb.TextDocumentView(origin="/tree/smcs", name="SMCs"),
@@ -376,8 +434,10 @@ def perception_text(edge: Edge, tree: Tree) -> str:
 
 def edge_label(edge: Edge, tree: Tree) -> str:
     """Graph label of an SMC: id, salient perceptions, gripper event, support, sources."""
-    return (f"{edge.id}: {perception_text(edge, tree)}\n{edge.smc.action.event} · "
-            f"support {edge.support}\n{_sources_text(edge)}")
+    return (
+        f"{edge.id}: {perception_text(edge, tree)}\n{edge.smc.action.event} · "
+        f"support {edge.support}\n{_sources_text(edge)}"
+    )
 
 
 def branch_colours(tree: Tree) -> dict[str, tuple[int, int, int]]:
@@ -433,15 +493,18 @@ def _yaw_quat(yaw: float) -> list[float]:
     return [0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)]
 
 
-def _boxes(clusters: Sequence[Any], colours: Sequence[Any], labels: Sequence[str],
-           radius: float) -> Any:
+def _boxes(
+    clusters: Sequence[Any], colours: Sequence[Any], labels: Sequence[str], radius: float
+) -> Any:
     import rerun as rr
 
     return rr.Boxes3D(
         centers=[c.centroid for c in clusters],
         half_sizes=[np.asarray(c.extents) / 2 for c in clusters],
         quaternions=[rr.Quaternion(xyzw=_yaw_quat(float(c.yaw))) for c in clusters],
-        colors=colours, labels=labels, radii=radius,
+        colors=colours,
+        labels=labels,
+        radii=radius,
     )
 
 
@@ -457,48 +520,93 @@ def log_tree(rec: Any, tree: Tree) -> None:
     for e in tree.edges:
         depth_of.setdefault(e.child, depth_of.get(e.parent, 0) + 1)
     rec.log("/world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    rec.log("/tree", rr.GraphNodes(
-        list(tree.nodes), positions=[pos[n] for n in tree.nodes],
-        labels=[f"{n} (root)" if n == ROOT else n for n in tree.nodes],
-        colors=[_ROOT if n == ROOT else _NODE for n in tree.nodes], radii=12.0,
-    ), static=True)
-    rec.log("/tree", rr.GraphEdges([(e.parent, e.child) for e in tree.edges],
-                                   graph_type="directed"), static=True)
+    rec.log(
+        "/tree",
+        rr.GraphNodes(
+            list(tree.nodes),
+            positions=[pos[n] for n in tree.nodes],
+            labels=[f"{n} (root)" if n == ROOT else n for n in tree.nodes],
+            colors=[_ROOT if n == ROOT else _NODE for n in tree.nodes],
+            radii=12.0,
+        ),
+        static=True,
+    )
+    rec.log(
+        "/tree",
+        rr.GraphEdges([(e.parent, e.child) for e in tree.edges], graph_type="directed"),
+        static=True,
+    )
     if tree.edges:
-        swatch = [(_cluster_rgb(e.smc.perception.cluster, tree)
-                   if e.smc.perception.cluster is not None else colours[e.id])
-                  for e in tree.edges]
-        mid = [((pos[e.parent][0] + pos[e.child][0]) / 2, (pos[e.parent][1] + pos[e.child][1]) / 2)
-               for e in tree.edges]
-        rec.log("/tree/labels", rr.GraphNodes(
-            [e.id for e in tree.edges], positions=mid, colors=swatch,
-            labels=[edge_label(e, tree) for e in tree.edges], radii=7.0,
-        ), static=True)
-    rows = ["| edge | parent → child | salient perceptions | event | goal | support | sources |",
-            "|---|---|---|---|---|---|---|"]
+        swatch = [
+            (
+                _cluster_rgb(e.smc.perception.cluster, tree)
+                if e.smc.perception.cluster is not None
+                else colours[e.id]
+            )
+            for e in tree.edges
+        ]
+        mid = [
+            ((pos[e.parent][0] + pos[e.child][0]) / 2, (pos[e.parent][1] + pos[e.child][1]) / 2)
+            for e in tree.edges
+        ]
+        rec.log(
+            "/tree/labels",
+            rr.GraphNodes(
+                [e.id for e in tree.edges],
+                positions=mid,
+                colors=swatch,
+                labels=[edge_label(e, tree) for e in tree.edges],
+                radii=7.0,
+            ),
+            static=True,
+        )
+    rows = [
+        "| edge | parent → child | salient perceptions | event | goal | support | sources |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for e in tree.edges:
         g = e.smc.action.goal
-        rows.append(f"| {e.id} | {e.parent} → {e.child} | {perception_text(e, tree)} | "
-                    f"{e.smc.action.event} | ({g[0]:+.3f}, {g[1]:+.3f}, {g[2]:+.3f}) "
-                    f"{e.smc.action.goal_frame} | {e.support} | {_sources_text(e, 10)} |")
+        rows.append(
+            f"| {e.id} | {e.parent} → {e.child} | {perception_text(e, tree)} | "
+            f"{e.smc.action.event} | ({g[0]:+.3f}, {g[1]:+.3f}, {g[2]:+.3f}) "
+            f"{e.smc.action.goal_frame} | {e.support} | {_sources_text(e, 10)} |"
+        )
     scene = tree.scene.get("name", "?")
-    head = (f"# SMC tree, version {tree.version}\n\nscene {scene}, {len(tree.nodes)} nodes, "
-            f"{len(tree.edges)} SMCs\n\n")
-    rec.log("/tree/smcs", rr.TextDocument(head + "\n".join(rows), media_type="text/markdown"),
-            static=True)
+    head = (
+        f"# SMC tree, version {tree.version}\n\nscene {scene}, {len(tree.nodes)} nodes, "
+        f"{len(tree.edges)} SMCs\n\n"
+    )
+    rec.log(
+        "/tree/smcs",
+        rr.TextDocument(head + "\n".join(rows), media_type="text/markdown"),
+        static=True,
+    )
     for e in tree.edges:
         dmp = e.smc.action.dmp
         _, y = rollout(dmp, start=dmp.start, goal=dmp.goal)
         base = f"/world/actions/{e.id}"
-        rec.log(base, rr.LineStrips3D([y[:, :3]], colors=[colours[e.id]], radii=0.003,
-                                      labels=[f"{e.id} ({e.smc.action.event})"]), static=True)
-        rec.log(f"{base}/goal", rr.Points3D([dmp.goal[:3]], colors=[colours[e.id]],
-                                            radii=0.008), static=True)
+        rec.log(
+            base,
+            rr.LineStrips3D(
+                [y[:, :3]],
+                colors=[colours[e.id]],
+                radii=0.003,
+                labels=[f"{e.id} ({e.smc.action.event})"],
+            ),
+            static=True,
+        )
+        rec.log(
+            f"{base}/goal",
+            rr.Points3D([dmp.goal[:3]], colors=[colours[e.id]], radii=0.008),
+            static=True,
+        )
         c = e.smc.perception.cluster
         if c is not None:
-            rec.log(f"{base}/object", _boxes([c], [_cluster_rgb(c, tree)],
-                                              [f"{e.id}: {_cluster_name(c, tree)}"], 0.001),
-                    static=True)
+            rec.log(
+                f"{base}/object",
+                _boxes([c], [_cluster_rgb(c, tree)], [f"{e.id}: {_cluster_name(c, tree)}"], 0.001),
+                static=True,
+            )
 
 
 # --- a log --------------------------------------------------------------------------------
@@ -527,14 +635,15 @@ def decision_points(log: Any, tree: Tree) -> list[tuple[float, float, str]]:
     t_end = float(log.poi_t[-1]) if len(log.poi_t) else 0.0
     if log.decisions:
         ts = [float(d["t"]) for d in log.decisions]
-        return [(t, ts[k + 1] if k + 1 < len(ts) else t_end, f"decision at {d.get('node')}")
-                for k, (t, d) in enumerate(zip(ts, log.decisions, strict=True))]
+        return [
+            (t, ts[k + 1] if k + 1 < len(ts) else t_end, f"decision at {d.get('node')}")
+            for k, (t, d) in enumerate(zip(ts, log.decisions, strict=True))
+        ]
     try:
         from smccli.compile import fragments
 
         frags = fragments(log, tree.params)
-        return [(f.t0, f.t1, f"fragment {k + 1} (ends: {f.cause})")
-                for k, f in enumerate(frags)]
+        return [(f.t0, f.t1, f"fragment {k + 1} (ends: {f.cause})") for k, f in enumerate(frags)]
     except Exception:  # a log compile would refuse still shows, cut at its marks
         t0 = float(log.poi_t[0]) if len(log.poi_t) else 0.0
         bounds = [t0, *sorted(m.t for m in log.marks), t_end]
@@ -542,8 +651,14 @@ def decision_points(log: Any, tree: Tree) -> list[tuple[float, float, str]]:
         return [(a, b, f"fragment {k + 1}") for k, (a, b) in enumerate(pairs) if b > a]
 
 
-def log_log(rec: Any, log: Any, tree: Tree, *, warn: Callable[[str], None] = lambda m: None,
-            perception: bool = True) -> None:
+def log_log(
+    rec: Any,
+    log: Any,
+    tree: Tree,
+    *,
+    warn: Callable[[str], None] = lambda m: None,
+    perception: bool = True,
+) -> None:
     """A demonstration or replay log on the ``time`` timeline (see the module docstring)."""
     import rerun as rr
 
@@ -551,32 +666,53 @@ def log_log(rec: Any, log: Any, tree: Tree, *, warn: Callable[[str], None] = lam
     tcol = rr.TimeColumn
     # POI: path taken (static), moving point and coordinates over time.
     if len(log.poi_t):
-        rec.log("/world/poi/path", rr.LineStrips3D([log.poi[:, :3]], colors=[(240, 240, 240)],
-                                                   radii=0.002, labels=[f"{name}: path taken"]),
-                static=True)
+        rec.log(
+            "/world/poi/path",
+            rr.LineStrips3D(
+                [log.poi[:, :3]],
+                colors=[(240, 240, 240)],
+                radii=0.002,
+                labels=[f"{name}: path taken"],
+            ),
+            static=True,
+        )
         n = len(log.poi_t)
         times = [tcol(TIMELINE, duration=log.poi_t)]
-        rec.send_columns("/world/poi", indexes=times,
-                         columns=rr.Points3D.columns(positions=log.poi[:, :3],
-                                                     radii=np.full(n, 0.01),
-                                                     colors=np.tile(_HIGHLIGHT, (n, 1))))
+        rec.send_columns(
+            "/world/poi",
+            indexes=times,
+            columns=rr.Points3D.columns(
+                positions=log.poi[:, :3], radii=np.full(n, 0.01), colors=np.tile(_HIGHLIGHT, (n, 1))
+            ),
+        )
         for i, axis in enumerate(("x", "y", "z", "yaw")):
-            rec.send_columns(f"/signals/poi/{axis}", indexes=times,
-                             columns=rr.Scalars.columns(scalars=log.poi[:, i]))
+            rec.send_columns(
+                f"/signals/poi/{axis}",
+                indexes=times,
+                columns=rr.Scalars.columns(scalars=log.poi[:, i]),
+            )
         if n > 1:
             dt = np.diff(log.poi_t)
             step = np.linalg.norm(np.diff(log.poi[:, :3], axis=0), axis=1)
             speed = step / np.where(dt > 0, dt, np.inf)
-            rec.send_columns("/signals/poi/speed",
-                             indexes=[tcol(TIMELINE, duration=log.poi_t[1:])],
-                             columns=rr.Scalars.columns(scalars=speed))
+            rec.send_columns(
+                "/signals/poi/speed",
+                indexes=[tcol(TIMELINE, duration=log.poi_t[1:])],
+                columns=rr.Scalars.columns(scalars=speed),
+            )
     if len(log.weight_t):
-        rec.send_columns("/signals/weight", indexes=[tcol(TIMELINE, duration=log.weight_t)],
-                         columns=rr.Scalars.columns(scalars=log.weight))
+        rec.send_columns(
+            "/signals/weight",
+            indexes=[tcol(TIMELINE, duration=log.weight_t)],
+            columns=rr.Scalars.columns(scalars=log.weight),
+        )
     if log.commands:
         ct = np.array([c.t for c in log.commands])
-        rec.send_columns("/signals/gripper", indexes=[tcol(TIMELINE, duration=ct)],
-                         columns=rr.Scalars.columns(scalars=[c.gripper for c in log.commands]))
+        rec.send_columns(
+            "/signals/gripper",
+            indexes=[tcol(TIMELINE, duration=ct)],
+            columns=rr.Scalars.columns(scalars=[c.gripper for c in log.commands]),
+        )
     _log_camera(rec, log)
     for pc in log.point_clouds:
         rec.set_time(TIMELINE, duration=pc.t)
@@ -585,21 +721,25 @@ def log_log(rec: Any, log: Any, tree: Tree, *, warn: Callable[[str], None] = lam
     # Events: one TextLog per saliency mark, per fragment, per decision.
     for m in log.marks:
         rec.set_time(TIMELINE, duration=m.t)
-        rec.log("/events/saliency", rr.TextLog(f"saliency mark ({m.source}) {m.label}".strip(),
-                                               level="INFO", color=_HIGHLIGHT))
+        rec.log(
+            "/events/saliency",
+            rr.TextLog(
+                f"saliency mark ({m.source}) {m.label}".strip(), level="INFO", color=_HIGHLIGHT
+            ),
+        )
     points = decision_points(log, tree)
     if not log.decisions:
         for t0, t1, label in points:
             rec.set_time(TIMELINE, duration=t0)
-            rec.log("/events/fragments", rr.TextLog(f"{label}: {t0:.2f}-{t1:.2f} s",
-                                                    level="DEBUG"))
+            rec.log("/events/fragments", rr.TextLog(f"{label}: {t0:.2f}-{t1:.2f} s", level="DEBUG"))
     _log_decisions(rec, log, tree, warn)
     if perception:
         _log_perception(rec, log, tree, points, warn)
 
 
-def _subsample(points: np.ndarray, colors: np.ndarray | None,
-               n: int = MAX_CLOUD_POINTS) -> tuple[np.ndarray, np.ndarray | None]:
+def _subsample(
+    points: np.ndarray, colors: np.ndarray | None, n: int = MAX_CLOUD_POINTS
+) -> tuple[np.ndarray, np.ndarray | None]:
     if len(points) <= n:
         return points, colors
     idx = np.random.default_rng(0).choice(len(points), n, replace=False)
@@ -619,9 +759,16 @@ def _log_camera(rec: Any, log: Any) -> None:
     def pose(f: Any) -> Any:
         return rr.Transform3D(translation=f.T_world_camera[:3, 3], mat3x3=f.T_world_camera[:3, :3])
 
-    rec.log("/world/camera", rr.Pinhole(image_from_camera=f0.K, resolution=[w, h],
-                                        camera_xyz=rr.ViewCoordinates.RDF,
-                                        image_plane_distance=0.15), static=True)
+    rec.log(
+        "/world/camera",
+        rr.Pinhole(
+            image_from_camera=f0.K,
+            resolution=[w, h],
+            camera_xyz=rr.ViewCoordinates.RDF,
+            image_plane_distance=0.15,
+        ),
+        static=True,
+    )
     if not moving:
         rec.log("/world/camera", pose(f0), static=True)
     for f in log.frames:
@@ -650,13 +797,16 @@ def _log_decisions(rec: Any, log: Any, tree: Tree, warn: Callable[[str], None]) 
         parts = []
         for c in cands:
             dp = c.get("d_p")
-            parts.append(f"{c.get('edge')} d_p={'-' if dp is None else f'{dp:.3f}'}"
-                         f"{' contingent' if c.get('contingent') else ''}")
+            parts.append(
+                f"{c.get('edge')} d_p={'-' if dp is None else f'{dp:.3f}'}"
+                f"{' contingent' if c.get('contingent') else ''}"
+            )
             if dp is not None:
                 rec.log(f"/signals/decision/d_p/{c.get('edge')}", rr.Scalars(float(dp)))
         chosen = d.get("chosen")
         text = f"node {d.get('node')}: chose {chosen if chosen is not None else 'none'} | " + (
-            "; ".join(parts) or "no candidates")
+            "; ".join(parts) or "no candidates"
+        )
         rec.log("/events/decisions", rr.TextLog(text, level="INFO" if chosen else "WARN"))
         goal = d.get("mapped_goal")
         if chosen is None or goal is None:
@@ -665,8 +815,10 @@ def _log_decisions(rec: Any, log: Any, tree: Tree, warn: Callable[[str], None]) 
             continue
         colour = colours.get(str(chosen), _HIGHLIGHT)
         goal = np.asarray(goal, dtype=float)
-        rec.log("/world/decisions/goal", rr.Points3D([goal[:3]], colors=[colour], radii=0.012,
-                                                     labels=[f"goal of {chosen}"]))
+        rec.log(
+            "/world/decisions/goal",
+            rr.Points3D([goal[:3]], colors=[colour], radii=0.012, labels=[f"goal of {chosen}"]),
+        )
         edge = edges.get(str(chosen))
         start = _poi_at(log, t)
         if edge is None:
@@ -674,15 +826,25 @@ def _log_decisions(rec: Any, log: Any, tree: Tree, warn: Callable[[str], None]) 
             continue
         if start is None or goal.shape != edge.smc.action.dmp.start.shape:
             continue
-        _, y = rollout(edge.smc.action.dmp, start=start, goal=goal,
-                       duration=float(d.get("duration") or edge.smc.action.dmp.duration))
-        rec.log("/world/decisions/planned", rr.LineStrips3D([y[:, :3]], colors=[colour],
-                                                            radii=0.004,
-                                                            labels=[f"{chosen} planned"]))
+        _, y = rollout(
+            edge.smc.action.dmp,
+            start=start,
+            goal=goal,
+            duration=float(d.get("duration") or edge.smc.action.dmp.duration),
+        )
+        rec.log(
+            "/world/decisions/planned",
+            rr.LineStrips3D([y[:, :3]], colors=[colour], radii=0.004, labels=[f"{chosen} planned"]),
+        )
 
 
-def _log_perception(rec: Any, log: Any, tree: Tree, points: Sequence[tuple[float, float, str]],
-                    warn: Callable[[str], None]) -> None:
+def _log_perception(
+    rec: Any,
+    log: Any,
+    tree: Tree,
+    points: Sequence[tuple[float, float, str]],
+    warn: Callable[[str], None],
+) -> None:
     """Point cloud, clusters and the salient cluster recomputed at each decision point."""
     import rerun as rr
 
@@ -713,9 +875,15 @@ def _log_perception(rec: Any, log: Any, tree: Tree, points: Sequence[tuple[float
         shown, shown_cols = _subsample(pts, cols)
         rec.log("/world/decisions/cloud", rr.Points3D(shown, colors=shown_cols, radii=0.0015))
         if clusters:
-            rec.log("/world/decisions/clusters", _boxes(
-                clusters, [_cluster_rgb(c, tree) for c in clusters],
-                [f"{_cluster_name(c, tree)} #{i}" for i, c in enumerate(clusters)], 0.002))
+            rec.log(
+                "/world/decisions/clusters",
+                _boxes(
+                    clusters,
+                    [_cluster_rgb(c, tree) for c in clusters],
+                    [f"{_cluster_name(c, tree)} #{i}" for i, c in enumerate(clusters)],
+                    0.002,
+                ),
+            )
         else:
             rec.log("/world/decisions/clusters", rr.Clear(recursive=False))
         idx = None
@@ -733,8 +901,10 @@ def _log_perception(rec: Any, log: Any, tree: Tree, points: Sequence[tuple[float
             text = f"{label}: {len(clusters)} cluster(s), none salient"
         else:
             c = clusters[idx]
-            rec.log("/world/decisions/salient", _boxes(
-                [c], [_HIGHLIGHT], [f"salient: {_cluster_name(c, tree)} #{idx}"], 0.005))
+            rec.log(
+                "/world/decisions/salient",
+                _boxes([c], [_HIGHLIGHT], [f"salient: {_cluster_name(c, tree)} #{idx}"], 0.005),
+            )
             text = f"{label}: {len(clusters)} cluster(s), salient #{idx} {_cluster_name(c, tree)}"
         rec.log("/events/perception", rr.TextLog(text, level="DEBUG"))
 
@@ -760,8 +930,9 @@ def save_previews(tree: Tree, log: Any | None, out_dir: Path) -> list[Path]:
     fig, ax = plt.subplots(figsize=(9, 6))
     for e in tree.edges:
         (x0, y0), (x1, y1) = pos[e.parent], pos[e.child]
-        ax.annotate("", (x1, -y1), (x0, -y0), arrowprops={"arrowstyle": "->", "lw": 1.5,
-                                                          "color": "0.4"})
+        ax.annotate(
+            "", (x1, -y1), (x0, -y0), arrowprops={"arrowstyle": "->", "lw": 1.5, "color": "0.4"}
+        )
         c = e.smc.perception.cluster
         sw = _cluster_rgb(c, tree) if c is not None else colours[e.id]
         mx, my = (x0 + x1) / 2, -(y0 + y1) / 2
@@ -769,8 +940,7 @@ def save_previews(tree: Tree, log: Any | None, out_dir: Path) -> list[Path]:
         ax.text(mx + 12, my, edge_label(e, tree), fontsize=7, va="center")
     for n in tree.nodes:
         x, y = pos[n]
-        ax.scatter([x], [-y], s=260, color=np.array(_ROOT if n == ROOT else _NODE) / 255,
-                   zorder=4)
+        ax.scatter([x], [-y], s=260, color=np.array(_ROOT if n == ROOT else _NODE) / 255, zorder=4)
         ax.text(x, -y + 22, n, ha="center", fontsize=9, weight="bold")
     ax.set_title("/tree: decision points and SMCs")
     ax.axis("off")
@@ -788,8 +958,13 @@ def save_previews(tree: Tree, log: Any | None, out_dir: Path) -> list[Path]:
         ax3.scatter(*dmp.goal[:3], color=np.array(colours[e.id]) / 255, s=25)
         c = e.smc.perception.cluster
         if c is not None:
-            ax3.scatter(*c.centroid, color=np.array(_cluster_rgb(c, tree)) / 255, s=120,
-                        marker="s", edgecolors="k")
+            ax3.scatter(
+                *c.centroid,
+                color=np.array(_cluster_rgb(c, tree)) / 255,
+                s=120,
+                marker="s",
+                edgecolors="k",
+            )
     if log is not None and len(log.poi_t):
         ax3.plot(*log.poi[:, :3].T, color="0.3", lw=1, ls="--", label="POI path taken")
     ax3.set_xlabel("x [m]")
@@ -824,8 +999,9 @@ def save_previews(tree: Tree, log: Any | None, out_dir: Path) -> list[Path]:
     for i, axis in enumerate(("x", "y", "z")):
         axes[0].plot(log.poi_t, log.poi[:, i], label=f"/signals/poi/{axis}")
     if log.commands:
-        axes[1].plot([c.t for c in log.commands], [c.gripper for c in log.commands],
-                     label="/signals/gripper")
+        axes[1].plot(
+            [c.t for c in log.commands], [c.gripper for c in log.commands], label="/signals/gripper"
+        )
     if len(log.weight_t):
         axes[1].plot(log.weight_t, log.weight, label="/signals/weight [kg]")
     for a in axes:

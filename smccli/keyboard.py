@@ -21,7 +21,9 @@ from __future__ import annotations
 
 import math
 import queue
+import threading
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -33,6 +35,10 @@ from smccli.sim import Sim
 # GLFW key codes (the viewer passes them to key_callback).
 KEY_RIGHT, KEY_LEFT, KEY_DOWN, KEY_UP = 262, 263, 264, 265
 KEY_PAGE_UP, KEY_PAGE_DOWN, KEY_ENTER = 266, 267, 257
+HELP = (
+    "keyboard operator ready: arrows x/y, PgUp/PgDn z, Q/E yaw, G gripper, M mark, "
+    "Enter finish, X discard"
+)
 STEP_M = 0.01
 STEP_YAW = math.radians(5)
 BINDINGS = {
@@ -54,7 +60,13 @@ BINDINGS = {
 class KeyboardOperator:
     """Reads queued key presses each control tick and turns them into POI commands."""
 
-    def __init__(self, sim: Sim, *, realtime: bool = True) -> None:
+    def __init__(
+        self,
+        sim: Sim,
+        *,
+        realtime: bool = True,
+        on_ready: Callable[[str], None] | None = None,
+    ) -> None:
         import mujoco.viewer
 
         self.sim = sim
@@ -62,18 +74,25 @@ class KeyboardOperator:
         self.target = sim.poi().copy()
         self.gripper = 1.0
         self.realtime = realtime
+        self._on_ready = on_ready
         self.discarded = False
         """True once the operator pressed X: the recording is thrown away."""
         self._t0_wall = time.perf_counter()
         self._t0_sim = sim.t
         try:
-            self.viewer = mujoco.viewer.launch_passive(sim.model, sim.data,
-                                                       key_callback=self.keys.put,
-                                                       show_left_ui=False, show_right_ui=False)
+            self.viewer = mujoco.viewer.launch_passive(
+                sim.model,
+                sim.data,
+                key_callback=self.keys.put,
+                show_left_ui=False,
+                show_right_ui=False,
+            )
         except Exception as exc:  # no display, no GL context
-            raise SmcError(f"keyboard operator: cannot open the MuJoCo viewer ({exc}); it "
-                           "needs a display (set DISPLAY, or run under xvfb-run with "
-                           "MUJOCO_GL=glfw)") from None
+            raise SmcError(
+                f"keyboard operator: cannot open the MuJoCo viewer ({exc}); it "
+                "needs a display (set DISPLAY, or run under xvfb-run with "
+                "MUJOCO_GL=glfw)"
+            ) from None
 
     def tick(self) -> OperatorOutput:
         """Apply the presses queued since the last tick; keep real time; sync the viewer."""
@@ -102,10 +121,22 @@ class KeyboardOperator:
             if ahead > 0:
                 time.sleep(ahead)
         self.viewer.sync()
+        if self._on_ready is not None:
+            # The viewer has drawn and is reading keys: tell the person (and tests).
+            self._on_ready(HELP)
+            self._on_ready = None
         cmd = PoiCommand(t=self.sim.t, target=self.target.copy(), gripper=self.gripper)
         self.discarded = self.discarded or discard
         return OperatorOutput(command=cmd, marks=tuple(marks), done=done)
 
     def close(self) -> None:
-        """Close the viewer window."""
+        """Close the viewer window and wait for its thread to finish.
+
+        The viewer registers ``glfw.terminate`` to run at exit; if its render thread is
+        still tearing down when that runs, the process segfaults. Python names a thread
+        after its target, which is how the (unexposed) viewer thread is found.
+        """
         self.viewer.close()
+        for thread in threading.enumerate():
+            if "_launch_internal" in thread.name:
+                thread.join(timeout=10.0)

@@ -14,12 +14,17 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from smccli import __version__
 from smccli.errors import OutputExistsError, ScriptError
 from smccli.logs import LogWriter, log_summary
 from smccli.scene import Scene, load_scene, nominal_layout, sample_layout
 from smccli.sim import Sim
+
+if TYPE_CHECKING:
+    from smccli.keyboard import KeyboardOperator
+    from smccli.operators import ScriptOperator
 
 MAX_DURATION = 600.0
 """A recording longer than this [s of sim time] is stopped as a runaway script."""
@@ -99,11 +104,17 @@ def _metadata(scene: Scene, cfg: RecordConfig, extra: dict[str, str]) -> dict[st
 
 def scene_attachments(scene: Scene) -> dict[str, tuple[str, bytes]]:
     """The scene's MJCF and YAML, attached to every log so it is self-contained."""
-    return {"scene.xml": ("application/xml", scene.mjcf.encode()),
-            "scene.yaml": ("application/yaml", scene.yaml_text.encode())}
+    return {
+        "scene.xml": ("application/xml", scene.mjcf.encode()),
+        "scene.yaml": ("application/yaml", scene.yaml_text.encode()),
+    }
 
 
-def record(cfg: RecordConfig, on_status: Callable[[RecordStatus], None] | None = None) -> RecordSummary:
+def record(
+    cfg: RecordConfig,
+    on_status: Callable[[RecordStatus], None] | None = None,
+    on_message: Callable[[str], None] | None = None,
+) -> RecordSummary:
     """Record one demonstration into ``cfg.output``; see the module docstring."""
     out = Path(cfg.output)
     if out.exists() and not cfg.force:
@@ -118,16 +129,17 @@ def record(cfg: RecordConfig, on_status: Callable[[RecordStatus], None] | None =
         script = load_script(cfg.script)
         layout = script_layout(scene, script, _rng(cfg.seed) if cfg.randomize else None)
         sim = Sim(scene, layout)
-        operator = ScriptOperator(script, sim, seed=cfg.seed)
+        operator: ScriptOperator | KeyboardOperator = ScriptOperator(script, sim, seed=cfg.seed)
         extra["script"] = Path(cfg.script).name
     elif cfg.operator == "keyboard":
         from smccli.keyboard import KeyboardOperator
 
         first = scene.variants[0][0] if scene.variants else None
-        layout = (sample_layout(scene, _rng(cfg.seed)) if cfg.randomize
-                  else nominal_layout(scene, first))
+        layout = (
+            sample_layout(scene, _rng(cfg.seed)) if cfg.randomize else nominal_layout(scene, first)
+        )
         sim = Sim(scene, layout)
-        operator = KeyboardOperator(sim)
+        operator = KeyboardOperator(sim, on_ready=on_message)
     else:
         raise ScriptError(f"unknown operator {cfg.operator!r} (valid: script, keyboard)")
     wall0 = time.perf_counter()
@@ -137,9 +149,13 @@ def record(cfg: RecordConfig, on_status: Callable[[RecordStatus], None] | None =
     next_cam = next_gt = 0.0
     tick = 0
     try:
-        with LogWriter(out, metadata=_metadata(scene, cfg, extra),
-                       attachments=scene_attachments(scene), force=cfg.force,
-                       wall_clock_flush=not cfg.reproducible) as writer:
+        with LogWriter(
+            out,
+            metadata=_metadata(scene, cfg, extra),
+            attachments=scene_attachments(scene),
+            force=cfg.force,
+            wall_clock_flush=not cfg.reproducible,
+        ) as writer:
             _log_state(writer, sim)
             frame = sim.render_camera()
             _log_cloud(writer, sim, frame)  # what the robot saw as the demonstration began
@@ -170,17 +186,23 @@ def record(cfg: RecordConfig, on_status: Callable[[RecordStatus], None] | None =
                 _log_state(writer, sim)
                 tick += 1
                 if on_status and tick % 10 == 0:
-                    on_status(RecordStatus(t=sim.t, messages=sum(writer.counts.values()),
-                                           marks=marks))
+                    on_status(
+                        RecordStatus(t=sim.t, messages=sum(writer.counts.values()), marks=marks)
+                    )
                 if sim.t > MAX_DURATION:
-                    raise ScriptError(f"{cfg.script or 'keyboard'}: recording passed "
-                                      f"{MAX_DURATION:.0f} s of simulation time; stopped")
+                    raise ScriptError(
+                        f"{cfg.script or 'keyboard'}: recording passed "
+                        f"{MAX_DURATION:.0f} s of simulation time; stopped"
+                    )
             if getattr(operator, "discarded", False):
                 writer.abort()
                 raise ScriptError("recording discarded by the operator; nothing written")
     finally:
-        operator.close() if hasattr(operator, "close") else None
+        # The sensor renderer's GL context first, then the viewer: the viewer's thread
+        # tears GLFW down, and a context freed after that crashes the process.
         sim.close()
+        if hasattr(operator, "close"):
+            operator.close()
     summary = log_summary(out)
     return RecordSummary(
         path=out,
@@ -213,5 +235,3 @@ def _rng(seed: int):
     import numpy as np
 
     return np.random.default_rng(seed)
-
-

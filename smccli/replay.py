@@ -46,8 +46,15 @@ from smccli.sim import Sim
 from smccli.smc import Action, goal_from_object
 from smccli.tree import ROOT, Edge, Tree, load_tree
 
-OUTCOMES = ("success", "no_contingent_smc", "target_unreachable", "timeout",
-            "grasp_missed", "object_dropped", "placed_outside")
+OUTCOMES = (
+    "success",
+    "no_contingent_smc",
+    "target_unreachable",
+    "timeout",
+    "grasp_missed",
+    "object_dropped",
+    "placed_outside",
+)
 """Episode outcomes: success, the three control stops, then the failure causes found at
 evaluation time from the trace and the final state."""
 
@@ -166,8 +173,9 @@ class EdgeStack:
         )
 
 
-def match_edges(stack: EdgeStack, clusters: Sequence[Cluster], weight: float | None,
-                params: SmcParams) -> tuple[np.ndarray, np.ndarray]:
+def match_edges(
+    stack: EdgeStack, clusters: Sequence[Cluster], weight: float | None, params: SmcParams
+) -> tuple[np.ndarray, np.ndarray]:
     """C_Now of the context against every stacked edge at once (eq. 36, 39).
 
     Returns (d_p (E,), cluster index (E,) int, -1 when the SMC has no cluster). Same values
@@ -183,8 +191,9 @@ def match_edges(stack: EdgeStack, clusters: Sequence[Cluster], weight: float | N
             hc = np.sqrt(hc / np.maximum(hc.sum(axis=1, keepdims=True), 1e-300))
             bc = stack.sqrt_hist @ hc.T  # (E, C) Bhattacharyya coefficients
             d_h = np.where(bc > 1.0 - 1e-12, 0.0, -np.log(np.maximum(bc, _BC_MIN)))
-            ec = np.log(np.maximum(np.array([c.extents for c in clusters], dtype=np.float64),
-                                   _MIN_EXTENT))
+            ec = np.log(
+                np.maximum(np.array([c.extents for c in clusters], dtype=np.float64), _MIN_EXTENT)
+            )
             d_e = np.abs(stack.log_ext[:, None, :] - ec[None, :, :]).max(axis=2)
             dc = d_h / pp.hist_scale + d_e / pp.extent_scale
             best = np.argmin(dc, axis=1)
@@ -196,8 +205,9 @@ def match_edges(stack: EdgeStack, clusters: Sequence[Cluster], weight: float | N
         if weight is None:
             d = np.where(stack.has_weight, np.inf, d)
         else:
-            d = d + np.where(stack.has_weight,
-                             np.abs(weight - stack.weight) / params.weight_scale, 0.0)
+            d = d + np.where(
+                stack.has_weight, np.abs(weight - stack.weight) / params.weight_scale, 0.0
+            )
     return d, idx
 
 
@@ -255,17 +265,28 @@ class Decision:
         return {
             "node": self.nodes[0],
             "nodes": list(self.nodes),
-            "candidates": [{"edge": c.edge, "node": c.node, "d_p": _num(c.d_p),
-                            "contingent": c.contingent, "cluster": c.cluster_index}
-                           for c in self.candidates],
+            "candidates": [
+                {
+                    "edge": c.edge,
+                    "node": c.node,
+                    "d_p": _num(c.d_p),
+                    "contingent": c.contingent,
+                    "cluster": c.cluster_index,
+                }
+                for c in self.candidates
+            ],
             "chosen": self.chosen,
-            "mapped_goal": None if self.mapped_goal is None else
-            [float(v) for v in self.mapped_goal],
+            "mapped_goal": None
+            if self.mapped_goal is None
+            else [float(v) for v in self.mapped_goal],
             "n_clusters": self.n_clusters,
             "weight": self.weight,
             "duration": self.duration,
-            "timings": {"perceive": self.perceive_s, "match": self.match_s,
-                        "total": self.latency_s},
+            "timings": {
+                "perceive": self.perceive_s,
+                "match": self.match_s,
+                "total": self.latency_s,
+            },
         }
 
 
@@ -332,9 +353,11 @@ class EpisodeResult:
             "layout": {k: list(v) for k, v in self.layout.items()},
             "final_poses": self.final_poses,
             "decisions": [d.to_json() for d in self.decisions],
-            "latency_ms": {"per_decision": lat,
-                           "p50": float(np.median(lat)) if lat else None,
-                           "max": max(lat) if lat else None},
+            "latency_ms": {
+                "per_decision": lat,
+                "p50": float(np.median(lat)) if lat else None,
+                "max": max(lat) if lat else None,
+            },
             "duration_s": self.duration,
             "demo_duration_s": self.demo_duration,
             "duration_ratio": self.duration / self.demo_duration if self.demo_duration else None,
@@ -359,8 +382,9 @@ def resolve(tree_path: Path | Tree, scene: str | Path | Scene | None) -> tuple[T
     tree_scene = str(tree.scene.get("name", "")) if tree.scene else ""
     if scene is None:
         if tree_scene not in builtin_names():
-            raise SceneError(f"{where}: built for scene {tree_scene!r}, which is not built in; "
-                             "pass --scene PATH")
+            raise SceneError(
+                f"{where}: built for scene {tree_scene!r}, which is not built in; pass --scene PATH"
+            )
         sc = load_scene(tree_scene)
     else:
         sc = scene if isinstance(scene, Scene) else load_scene(scene)
@@ -419,9 +443,14 @@ def equivalent(a: Edge, b: Edge, params: SmcParams) -> bool:
 class Controller:
     """The SMC-aware control of Algorithm 2 over a :class:`Sensors` facade."""
 
-    def __init__(self, tree: Tree, scene: Scene, sensors: Sensors,
-                 on_decision: Callable[[Decision, CameraFrame, np.ndarray], None] | None = None,
-                 max_time: float = 120.0) -> None:
+    def __init__(
+        self,
+        tree: Tree,
+        scene: Scene,
+        sensors: Sensors,
+        on_decision: Callable[[Decision, CameraFrame, np.ndarray], None] | None = None,
+        max_time: float = 120.0,
+    ) -> None:
         self.tree = tree
         self.params = tree.params
         self.sensors = sensors
@@ -461,8 +490,9 @@ class Controller:
             self._stacks[nodes] = EdgeStack.build(edges)
         return self._stacks[nodes]
 
-    def decide(self, nodes: tuple[str, ...]) -> tuple[Decision, Edge | None, Cluster | None,
-                                                      CameraFrame]:
+    def decide(
+        self, nodes: tuple[str, ...]
+    ) -> tuple[Decision, Edge | None, Cluster | None, CameraFrame]:
         t = self.sensors.t
         frame, clusters, weight, perceive_s = self.perceive()
         t0 = time.perf_counter()
@@ -471,15 +501,23 @@ class Controller:
         ok = d < self.params.t_hp
         chosen = int(np.argmin(np.where(ok, d, np.inf))) if ok.any() else None
         match_s = time.perf_counter() - t0
-        cands = tuple(Candidate(e.id, e.parent, float(d[i]), bool(ok[i]),
-                                None if idx[i] < 0 else int(idx[i]))
-                      for i, e in enumerate(stack.edges))
+        cands = tuple(
+            Candidate(e.id, e.parent, float(d[i]), bool(ok[i]), None if idx[i] < 0 else int(idx[i]))
+            for i, e in enumerate(stack.edges)
+        )
         edge = None if chosen is None else stack.edges[chosen]
         cluster = None if edge is None or idx[chosen] < 0 else clusters[int(idx[chosen])]
-        dec = Decision(t=t, nodes=nodes, candidates=cands,
-                       chosen=None if edge is None else edge.id, mapped_goal=None,
-                       n_clusters=len(clusters), weight=weight, perceive_s=perceive_s,
-                       match_s=match_s)
+        dec = Decision(
+            t=t,
+            nodes=nodes,
+            candidates=cands,
+            chosen=None if edge is None else edge.id,
+            mapped_goal=None,
+            n_clusters=len(clusters),
+            weight=weight,
+            perceive_s=perceive_s,
+            match_s=match_s,
+        )
         return dec, edge, cluster, frame
 
     def map_goal(self, action: Action, cluster: Cluster | None, start: np.ndarray) -> np.ndarray:
@@ -509,34 +547,47 @@ class Controller:
         self._last_cmd = cmd
         self.sensors.step(cmd)
 
-    def execute(self, edge: Edge, start: np.ndarray, goal: np.ndarray,
-                duration: float) -> ActionTrace:
+    def execute(
+        self, edge: Edge, start: np.ndarray, goal: np.ndarray, duration: float
+    ) -> ActionTrace:
         """Stream the rollout, hold the goal until the POI arrives, then the gripper event."""
         a = edge.smc.action
         s = self.sensors
         t0 = s.t
         opening0 = s.gripper_opening()
         grip = 1.0 if a.gripper_start >= 0.5 else 0.0
-        _, path = rollout(a.dmp, start=start, goal=goal, duration=duration,
-                          n_steps=max(2, round(duration / s.control_period)) + 1)
+        _, path = rollout(
+            a.dmp,
+            start=start,
+            goal=goal,
+            duration=duration,
+            n_steps=max(2, round(duration / s.control_period)) + 1,
+        )
         end = 1.0 if a.gripper_end >= 0.5 else 0.0
         # A gripper switch inside the fragment (e.g. grasp, then lift): stream the rollout to
         # that phase, hold there while the fingers move, then go on with the new opening.
         midway = a.event != "none" and a.gripper_phase < MIDWAY_PHASE
         k = int(round(a.gripper_phase * (len(path) - 1))) if midway else len(path) - 1
-        for y in path[1:k + 1]:
+        for y in path[1 : k + 1]:
             self._send(PoiCommand(s.t, y, grip))
         if midway:
             self._arrive(path[k], grip)
             self._gripper_event(path[k], end, record_weight=False)
-            for y in path[k + 1:]:
+            for y in path[k + 1 :]:
                 self._send(PoiCommand(s.t, y, end))
             grip = end
         arrived = self._arrive(goal, grip)
         if a.event != "none" and not midway:
             self._gripper_event(goal, end, record_weight=True)
-        return ActionTrace(edge=edge.id, event=a.event, t0=t0, t1=s.t, opening_before=opening0,
-                           opening_after=s.gripper_opening(), arrived=arrived)
+        return ActionTrace(
+            edge=edge.id,
+            event=a.event,
+            t0=t0,
+            t1=s.t,
+            opening_before=opening0,
+            opening_after=s.gripper_opening(),
+            arrived=arrived,
+        )
 
     def _arrive(self, target: np.ndarray, grip: float) -> bool:
         """Hold ``target`` until the POI is within the tolerance (at most MAX_HOLD)."""
@@ -578,11 +629,16 @@ class Controller:
                 decisions.append(dec)
                 if self.on_decision:
                     self.on_decision(dec, frame, np.zeros((0, 3)))
-                best = ", ".join(f"{c.edge} d_p={c.d_p:.3f}" for c in
-                                 sorted(dec.candidates, key=lambda c: c.d_p))
-                return ("no_contingent_smc",
-                        f"no contingent SMC at node {nodes[0]} (T_hP={self.params.t_hp}): {best}",
-                        decisions, actions, path)
+                best = ", ".join(
+                    f"{c.edge} d_p={c.d_p:.3f}" for c in sorted(dec.candidates, key=lambda c: c.d_p)
+                )
+                return (
+                    "no_contingent_smc",
+                    f"no contingent SMC at node {nodes[0]} (T_hP={self.params.t_hp}): {best}",
+                    decisions,
+                    actions,
+                    path,
+                )
             start = self.sensors.poi()
             goal = self.map_goal(edge.smc.action, cluster, start)
             duration = self.duration(edge.smc.action, start, goal)
@@ -591,14 +647,20 @@ class Controller:
             if self.on_decision:
                 self.on_decision(dec, frame, start)
             if not reachable(self.sensors.model, goal):
-                return ("target_unreachable",
-                        f"edge {edge.id}: goal [{goal[0]:.3f}, {goal[1]:.3f}, {goal[2]:.3f}] m, "
-                        f"yaw {goal[3]:.2f} rad is out of reach", decisions, actions, path)
+                return (
+                    "target_unreachable",
+                    f"edge {edge.id}: goal [{goal[0]:.3f}, {goal[1]:.3f}, {goal[2]:.3f}] m, "
+                    f"yaw {goal[3]:.2f} rad is out of reach",
+                    decisions,
+                    actions,
+                    path,
+                )
             actions.append(self.execute(edge, start, goal, duration))
             path.append(edge)
             siblings = self.stack(nodes).edges
-            nodes = tuple(e.child for e in siblings
-                          if e is edge or equivalent(e, edge, self.params))
+            nodes = tuple(
+                e.child for e in siblings if e is edge or equivalent(e, edge, self.params)
+            )
 
 
 def _fields(obj: Any) -> dict[str, Any]:
@@ -614,14 +676,21 @@ def manipulated_object(scene: Scene, layout: Layout, final: dict[str, list[float
     names = [c.object for crit in scene.success for c in crit.any_of if c.object in layout]
     if not names:
         return None
-    moved = [(math.dist(layout[n][:2], final[n][:2]) if n in final else 0.0, -i, n)
-             for i, n in enumerate(names)]
+    moved = [
+        (math.dist(layout[n][:2], final[n][:2]) if n in final else 0.0, -i, n)
+        for i, n in enumerate(names)
+    ]
     best = max(moved)
     return best[2] if best[0] > 0.02 else names[0]
 
 
-def classify_failure(scene: Scene, layout: Layout, final: dict[str, list[float]],
-                     actions: Sequence[ActionTrace], obj: str | None) -> str:
+def classify_failure(
+    scene: Scene,
+    layout: Layout,
+    final: dict[str, list[float]],
+    actions: Sequence[ActionTrace],
+    obj: str | None,
+) -> str:
     """Why an episode that reached a leaf failed: grasp_missed, object_dropped, placed_outside.
 
     From the trace (gripper openings after close events, before open events) and the final
@@ -640,8 +709,14 @@ def classify_failure(scene: Scene, layout: Layout, final: dict[str, list[float]]
     if any(a.opening_before < EMPTY_GRIP for a in opens):
         return "object_dropped"
     targets = [c.target for crit in scene.success for c in crit.any_of if c.object == obj]
-    near = min((math.dist(final[obj][:2], final[t][:2]) - scene.object(t).footprint_radius
-                for t in targets if t in final), default=0.0)
+    near = min(
+        (
+            math.dist(final[obj][:2], final[t][:2]) - scene.object(t).footprint_radius
+            for t in targets
+            if t in final
+        ),
+        default=0.0,
+    )
     return "object_dropped" if near > 0.05 else "placed_outside"
 
 
@@ -651,19 +726,29 @@ def classify_failure(scene: Scene, layout: Layout, final: dict[str, list[float]]
 class _ReplayLog:
     """Writes the recorder's topics plus /smc/decision and /perception/points."""
 
-    def __init__(self, path: Path, scene: Scene, sim: Sim, tree: Tree, seed: int,
-                 layout: Layout, force: bool) -> None:
+    def __init__(
+        self, path: Path, scene: Scene, sim: Sim, tree: Tree, seed: int, layout: Layout, force: bool
+    ) -> None:
         from smccli import __version__
         from smccli.logs import LogWriter
         from smccli.record import scene_attachments
 
-        meta = {"scene": scene.name, "scene_digest": scene.digest, "smc_version": __version__,
-                "seed": str(seed), "operator": "replay", "control_rate_hz": "100",
-                "state_rate_hz": "100", "camera_rate_hz": f"{scene.camera.rate:g}",
-                "has_scale": "true" if scene.scale else "false",
-                "tree_digest": _tree_digest(tree), "layout": json.dumps(layout)}
-        self.writer = LogWriter(path, metadata=meta, attachments=scene_attachments(scene),
-                                force=force)
+        meta = {
+            "scene": scene.name,
+            "scene_digest": scene.digest,
+            "smc_version": __version__,
+            "seed": str(seed),
+            "operator": "replay",
+            "control_rate_hz": "100",
+            "state_rate_hz": "100",
+            "camera_rate_hz": f"{scene.camera.rate:g}",
+            "has_scale": "true" if scene.scale else "false",
+            "tree_digest": _tree_digest(tree),
+            "layout": json.dumps(layout),
+        }
+        self.writer = LogWriter(
+            path, metadata=meta, attachments=scene_attachments(scene), force=force
+        )
         self.sim = sim
         self.scene = scene
         self.params = tree.params
@@ -721,9 +806,16 @@ def demo_duration(path: Sequence[Edge]) -> float:
     return float(sum(np.mean([s.t1 - s.t0 for s in e.sources]) for e in path if e.sources))
 
 
-def episode(tree: Tree, scene: Scene, layout: Layout, *, seed: int = 0,
-            output: Path | None = None, force: bool = False,
-            evaluate: Callable[[Sim], None] | None = None) -> EpisodeResult:
+def episode(
+    tree: Tree,
+    scene: Scene,
+    layout: Layout,
+    *,
+    seed: int = 0,
+    output: Path | None = None,
+    force: bool = False,
+    evaluate: Callable[[Sim], None] | None = None,
+) -> EpisodeResult:
     """Run Algorithm 2 once on ``layout`` and score it. ``evaluate`` runs first thing after
     control (tests use it to re-enable object queries)."""
     wall0 = time.perf_counter()
@@ -734,8 +826,7 @@ def episode(tree: Tree, scene: Scene, layout: Layout, *, seed: int = 0,
             log = _ReplayLog(Path(output), scene, sim, tree, seed, layout, force)
         sensors = Sensors(sim, on_step=None if log is None else log.on_step)
         sensors.render_camera()  # the camera is running before the task starts (GL warm-up)
-        ctl = Controller(tree, scene, sensors,
-                         on_decision=None if log is None else log.on_decision)
+        ctl = Controller(tree, scene, sensors, on_decision=None if log is None else log.on_decision)
         t0 = sim.t
         outcome, reason, decisions, actions, path = ctl.run()
         duration = sim.t - t0
@@ -763,16 +854,33 @@ def episode(tree: Tree, scene: Scene, layout: Layout, *, seed: int = 0,
         reason = verdict.reason
         if not ok:
             outcome = classify_failure(scene, layout, final, actions, obj)
-    return EpisodeResult(outcome=outcome, success=ok, reason=reason, decisions=tuple(decisions),
-                         actions=tuple(actions), path=tuple(e.id for e in path), layout=layout,
-                         duration=duration, demo_duration=demo_duration(path),
-                         wall_time=time.perf_counter() - wall0, manipulated=obj,
-                         final_poses=final, output=None if output is None else Path(output))
+    return EpisodeResult(
+        outcome=outcome,
+        success=ok,
+        reason=reason,
+        decisions=tuple(decisions),
+        actions=tuple(actions),
+        path=tuple(e.id for e in path),
+        layout=layout,
+        duration=duration,
+        demo_duration=demo_duration(path),
+        wall_time=time.perf_counter() - wall0,
+        manipulated=obj,
+        final_poses=final,
+        output=None if output is None else Path(output),
+    )
 
 
-def run_episode(tree: Path | Tree, *, scene: str | Path | Scene | None = None, seed: int = 0,
-                layout: Path | Layout | None = None, output: Path | None = None,
-                report: Path | None = None, force: bool = False) -> EpisodeResult:
+def run_episode(
+    tree: Path | Tree,
+    *,
+    scene: str | Path | Scene | None = None,
+    seed: int = 0,
+    layout: Path | Layout | None = None,
+    output: Path | None = None,
+    report: Path | None = None,
+    force: bool = False,
+) -> EpisodeResult:
     """``smc replay TREE``: one episode on the layout file or the seed's layout (trial 0).
 
     Raises TreeError/SceneError (exit 2) for a bad tree or scene, OutputExistsError when
@@ -790,42 +898,66 @@ def run_episode(tree: Path | Tree, *, scene: str | Path | Scene | None = None, s
         lay = read_layout(Path(layout), sc)
     result = episode(t, sc, lay, seed=seed, output=output, force=force)
     if report is not None:
-        doc = {"tree": str(tree) if not isinstance(tree, Tree) else None,
-               "tree_digest": _tree_digest(t), "scene": sc.name, "seed": seed,
-               **result.to_report()}
+        doc = {
+            "tree": str(tree) if not isinstance(tree, Tree) else None,
+            "tree_digest": _tree_digest(t),
+            "scene": sc.name,
+            "seed": seed,
+            **result.to_report(),
+        }
         Path(report).write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n")
     return result
 
 
 def print_episode(result: EpisodeResult, console: Any) -> None:
     """Human summary of an episode (rich console)."""
+    from rich.markup import escape
     from rich.table import Table
 
     colour = "green" if result.success else "red"
-    console.print(f"[bold {colour}]{result.outcome}[/]: {result.reason}", highlight=False)
+    console.print(f"[bold {colour}]{result.outcome}[/]: {escape(result.reason)}", highlight=False)
     table = Table("node", "chosen", "candidates (d_p, * = contingent)", "goal", "latency [ms]")
     for d in result.decisions:
-        cands = ", ".join(f"{c.edge} {c.d_p:.3f}{'*' if c.contingent else ''}"
-                          for c in d.candidates)
-        goal = "" if d.mapped_goal is None else \
-            "[" + ", ".join(f"{v:.3f}" for v in d.mapped_goal) + "]"
-        table.add_row("/".join(d.nodes), d.chosen or "-", cands, goal,
-                      f"{1e3 * d.latency_s:.1f}")
+        cands = ", ".join(
+            f"{c.edge} {c.d_p:.3f}{'*' if c.contingent else ''}" for c in d.candidates
+        )
+        goal = (
+            ""
+            if d.mapped_goal is None
+            else "[" + ", ".join(f"{v:.3f}" for v in d.mapped_goal) + "]"
+        )
+        table.add_row("/".join(d.nodes), d.chosen or "-", cands, goal, f"{1e3 * d.latency_s:.1f}")
     console.print(table)
     ratio = result.duration / result.demo_duration if result.demo_duration else float("nan")
-    console.print(f"task {result.duration:.2f} s (demonstration {result.demo_duration:.2f} s, "
-                  f"x{ratio:.2f}); wall {result.wall_time:.2f} s"
-                  + (f"; log {result.output}" if result.output else ""))
+    console.print(
+        f"task {result.duration:.2f} s (demonstration {result.demo_duration:.2f} s, "
+        f"x{ratio:.2f}); wall {result.wall_time:.2f} s"
+        + (f"; log {result.output}" if result.output else "")
+    )
 
 
 # campaigns live in smccli.campaign; re-exported for the CLI
-def run_campaign(tree: Path, *, scene: str | None = None, trials: int, seed: int = 0,
-                 workers: int = 1, report: Path | None = None,
-                 on_trial: Callable[[int, int], None] | None = None) -> dict[str, Any]:
+def run_campaign(
+    tree: Path,
+    *,
+    scene: str | None = None,
+    trials: int,
+    seed: int = 0,
+    workers: int = 1,
+    report: Path | None = None,
+    on_trial: Callable[[int, int], None] | None = None,
+) -> dict[str, Any]:
     from smccli.campaign import run_campaign as _run
 
-    return _run(tree, scene=scene, trials=trials, seed=seed, workers=workers, report=report,
-                on_trial=on_trial)
+    return _run(
+        tree,
+        scene=scene,
+        trials=trials,
+        seed=seed,
+        workers=workers,
+        report=report,
+        on_trial=on_trial,
+    )
 
 
 def print_campaign(summary: dict[str, Any], console: Any) -> None:
@@ -834,7 +966,24 @@ def print_campaign(summary: dict[str, Any], console: Any) -> None:
     _print(summary, console)
 
 
-__all__ = ["OUTCOMES", "Candidate", "Controller", "Decision", "EdgeStack", "EpisodeResult",
-           "Sensors", "classify_failure", "episode", "equivalent", "layout_for", "match_edges",
-           "print_campaign", "print_episode", "read_layout", "resolve", "run_campaign",
-           "run_episode", "SmcError"]
+__all__ = [
+    "OUTCOMES",
+    "Candidate",
+    "Controller",
+    "Decision",
+    "EdgeStack",
+    "EpisodeResult",
+    "Sensors",
+    "classify_failure",
+    "episode",
+    "equivalent",
+    "layout_for",
+    "match_edges",
+    "print_campaign",
+    "print_episode",
+    "read_layout",
+    "resolve",
+    "run_campaign",
+    "run_episode",
+    "SmcError",
+]

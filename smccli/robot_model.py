@@ -33,8 +33,9 @@ def robot_body_ids(model: mujoco.MjModel, joint_names: tuple[str, ...]) -> np.nd
     return np.array(sorted(ids), dtype=int)
 
 
-def geometry(model: mujoco.MjModel, data: mujoco.MjData, bodies: np.ndarray,
-             margin: float = MARGIN) -> RobotGeometry:
+def geometry(
+    model: mujoco.MjModel, data: mujoco.MjData, bodies: np.ndarray, margin: float = MARGIN
+) -> RobotGeometry:
     """Bounding spheres of the geoms of ``bodies`` at ``data``'s kinematics (world frame)."""
     centers: list[np.ndarray] = []
     radii: list[float] = []

@@ -19,10 +19,20 @@ def scripts(root: Path = ROOT) -> list[Path]:
 def main() -> int:
     for script in scripts():
         out = script.with_suffix(".mcap")
-        summary = record(RecordConfig(scene=script.parent.name, script=script, seed=0,
-                                      output=out, force=True, reproducible=True))
-        print(f"{out.relative_to(ROOT.parent)}: {summary.duration:.1f} s, "
-              f"{summary.fragments} marks, {summary.size_bytes / 1e6:.2f} MB")
+        summary = record(
+            RecordConfig(
+                scene=script.parent.name,
+                script=script,
+                seed=0,
+                output=out,
+                force=True,
+                reproducible=True,
+            )
+        )
+        print(
+            f"{out.relative_to(ROOT.parent)}: {summary.duration:.1f} s, "
+            f"{summary.fragments} marks, {summary.size_bytes / 1e6:.2f} MB"
+        )
     return 0
 
 

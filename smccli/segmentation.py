@@ -65,8 +65,9 @@ class Trace:
     """End of the log [s]."""
 
 
-def _settle_time(t: np.ndarray, speed: np.ndarray, t_edge: float, thr: float, hold: float,
-                 cap: float) -> float:
+def _settle_time(
+    t: np.ndarray, speed: np.ndarray, t_edge: float, thr: float, hold: float, cap: float
+) -> float:
     """First time after ``t_edge`` from which ``speed`` stays below ``thr`` for ``hold`` s."""
     if len(t) == 0:
         return t_edge
@@ -139,20 +140,27 @@ def pause_cuts(trace: Trace, t0: float, t1: float, min_pause: float = 0.4) -> li
     cuts: list[float] = []
     for bkp in algo.predict(pen=float(np.var(speed) * 20 + 1e-6))[:-1]:
         before = speed[max(0, bkp - int(min_pause / np.median(np.diff(t)))) : bkp]
-        if len(before) and float(np.max(before)) < 0.01 and speed[min(bkp + 5, len(speed) - 1)] > 0.01:
+        if (
+            len(before)
+            and float(np.max(before)) < 0.01
+            and speed[min(bkp + 5, len(speed) - 1)] > 0.01
+        ):
             cuts.append(float(t[bkp]))
     return cuts
 
 
-def segment(trace: Trace, mode: SegmentMode, *, snap_window: float, min_fragment: float,
-            auto_gap: float) -> list[Fragment]:
+def segment(
+    trace: Trace, mode: SegmentMode, *, snap_window: float, min_fragment: float, auto_gap: float
+) -> list[Fragment]:
     """Fragments of a demonstration, in time order (paper 3.1).
 
     The log's start opens the first fragment; each boundary closes one. Boundaries closer
     than ``min_fragment`` collapse into the later one. No boundary at all: one fragment.
     """
-    edges = sorted([(t, "gripper") for t in gripper_edges(trace)]
-                   + [(t, "weight") for t in weight_edges(trace)])
+    edges = sorted(
+        [(t, "gripper") for t in gripper_edges(trace)]
+        + [(t, "weight") for t in weight_edges(trace)]
+    )
     bounds: list[tuple[float, str]] = []
     if mode in (SegmentMode.markers, SegmentMode.both):
         for m in trace.marks:
@@ -193,9 +201,15 @@ def segment(trace: Trace, mode: SegmentMode, *, snap_window: float, min_fragment
     return fragments
 
 
-def trace_from_commands(commands: list[PoiCommand], t_fingers: np.ndarray,
-                        finger_speed: np.ndarray, t_weight: np.ndarray, weight: np.ndarray,
-                        marks: tuple[float, ...], t_end: float) -> Trace:
+def trace_from_commands(
+    commands: list[PoiCommand],
+    t_fingers: np.ndarray,
+    finger_speed: np.ndarray,
+    t_weight: np.ndarray,
+    weight: np.ndarray,
+    marks: tuple[float, ...],
+    t_end: float,
+) -> Trace:
     """Assemble a :class:`Trace` from decoded log messages."""
     t_cmd = np.array([c.t for c in commands], dtype=float)
     return Trace(

@@ -99,8 +99,9 @@ def goal_in_object(goal_world: np.ndarray, cluster: Cluster) -> np.ndarray:
     yaw = object_yaw(cluster)
     c, s = math.cos(-yaw), math.sin(-yaw)
     d = goal_world[:3] - cluster.centroid
-    return np.array([c * d[0] - s * d[1], s * d[0] + c * d[1], d[2],
-                     wrap_angle(goal_world[3] - yaw)])
+    return np.array(
+        [c * d[0] - s * d[1], s * d[0] + c * d[1], d[2], wrap_angle(goal_world[3] - yaw)]
+    )
 
 
 def goal_from_object(goal_obj: np.ndarray, cluster: Cluster, near_yaw: float) -> np.ndarray:
@@ -127,8 +128,7 @@ def goal_from_object(goal_obj: np.ndarray, cluster: Cluster, near_yaw: float) ->
     c, s = math.cos(obj_yaw), math.sin(obj_yaw)
     dx, dy, dz = goal_obj[:3]
     centre = cluster.centroid
-    return np.array([centre[0] + c * dx - s * dy, centre[1] + s * dx + c * dy, centre[2] + dz,
-                     yaw])
+    return np.array([centre[0] + c * dx - s * dy, centre[1] + s * dx + c * dy, centre[2] + dz, yaw])
 
 
 # --- JSON (no pickle: every value is a list of floats, a number or a string) -------------

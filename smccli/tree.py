@@ -86,14 +86,27 @@ def insert_chain(tree: Tree, chain: Sequence[Smc], sources: Sequence[Source]) ->
             for smc_k, src_k in zip(chain[j:], sources[j:], strict=True):
                 child = f"n{len(nodes)}"
                 nodes.append(child)
-                edges.append(Edge(id=f"e{len(edges) + 1}", parent=node, child=child,
-                                  smc=smc_k, support=1, sources=(src_k,)))
+                edges.append(
+                    Edge(
+                        id=f"e{len(edges) + 1}",
+                        parent=node,
+                        child=child,
+                        smc=smc_k,
+                        support=1,
+                        sources=(src_k,),
+                    )
+                )
                 node = child
             break
         best = min(candidates, key=lambda e: d_p(smc.perception, e.smc.perception, tree.params))
-        merged = Edge(id=best.id, parent=best.parent, child=best.child,
-                      smc=merge(best.smc, smc, best.support, 1), support=best.support + 1,
-                      sources=(*best.sources, src))
+        merged = Edge(
+            id=best.id,
+            parent=best.parent,
+            child=best.child,
+            smc=merge(best.smc, smc, best.support, 1),
+            support=best.support + 1,
+            sources=(*best.sources, src),
+        )
         edges[edges.index(best)] = merged
         node = best.child
     return replace(tree, nodes=tuple(nodes), edges=tuple(edges))
@@ -107,14 +120,24 @@ def _content(tree: Tree) -> dict[str, Any]:
     edges = []
     for e in tree.edges:
         perception, action = smc_to_dict(e.smc)
-        edges.append({
-            "id": e.id, "parent": e.parent, "child": e.child,
-            "perception": perception, "action": action, "support": e.support,
-            "sources": [{"log": s.log, "sha256": s.sha256, "t0": s.t0, "t1": s.t1}
-                        for s in e.sources],
-        })
-    return {"params": params_to_dict(tree.params), "nodes": [{"id": n} for n in tree.nodes],
-            "edges": edges}
+        edges.append(
+            {
+                "id": e.id,
+                "parent": e.parent,
+                "child": e.child,
+                "perception": perception,
+                "action": action,
+                "support": e.support,
+                "sources": [
+                    {"log": s.log, "sha256": s.sha256, "t0": s.t0, "t1": s.t1} for s in e.sources
+                ],
+            }
+        )
+    return {
+        "params": params_to_dict(tree.params),
+        "nodes": [{"id": n} for n in tree.nodes],
+        "edges": edges,
+    }
 
 
 def digest(tree: Tree) -> str:
@@ -150,10 +173,12 @@ def tree_from_dict(doc: Any, where: str = "tree") -> Tree:
     import jsonschema
 
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        raise TreeError(f"{where}: not an smc tree (expected \"format\": \"{FORMAT}\")")
+        raise TreeError(f'{where}: not an smc tree (expected "format": "{FORMAT}")')
     if doc.get("schema_version") != SCHEMA_VERSION:
-        raise TreeError(f"{where}: schema_version {doc.get('schema_version')!r} not supported "
-                        f"(this smc reads {SCHEMA_VERSION})")
+        raise TreeError(
+            f"{where}: schema_version {doc.get('schema_version')!r} not supported "
+            f"(this smc reads {SCHEMA_VERSION})"
+        )
     try:
         jsonschema.validate(doc, _schema())
     except jsonschema.ValidationError as exc:
@@ -162,16 +187,29 @@ def tree_from_dict(doc: Any, where: str = "tree") -> Tree:
     try:
         params = params_from_dict(SmcParams, doc["params"])
         edges = tuple(
-            Edge(id=e["id"], parent=e["parent"], child=e["child"],
-                 smc=smc_from_dict(e["perception"], e["action"]), support=int(e["support"]),
-                 sources=tuple(Source(log=s["log"], sha256=s["sha256"], t0=float(s["t0"]),
-                                      t1=float(s["t1"])) for s in e["sources"]))
-            for e in doc["edges"])
+            Edge(
+                id=e["id"],
+                parent=e["parent"],
+                child=e["child"],
+                smc=smc_from_dict(e["perception"], e["action"]),
+                support=int(e["support"]),
+                sources=tuple(
+                    Source(log=s["log"], sha256=s["sha256"], t0=float(s["t0"]), t1=float(s["t1"]))
+                    for s in e["sources"]
+                ),
+            )
+            for e in doc["edges"]
+        )
     except (KeyError, TypeError, ValueError) as exc:
         raise TreeError(f"{where}: invalid content ({exc})") from None
-    tree = Tree(params=params, nodes=tuple(n["id"] for n in doc["nodes"]), edges=edges,
-                version=int(doc["version"]), history=tuple(doc["history"]),
-                scene=dict(doc.get("scene", {})))
+    tree = Tree(
+        params=params,
+        nodes=tuple(n["id"] for n in doc["nodes"]),
+        edges=edges,
+        version=int(doc["version"]),
+        history=tuple(doc["history"]),
+        scene=dict(doc.get("scene", {})),
+    )
     if digest(tree) != doc["digest"]:
         raise TreeError(f"{where}: digest mismatch (file edited or corrupt)")
     node_ids = set(tree.nodes)
@@ -189,8 +227,9 @@ def load_tree(path: Path) -> Tree:
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise TreeError(f"{path}: not valid JSON ({exc.__class__.__name__}: "
-                        f"{str(exc).splitlines()[0]})") from None
+        raise TreeError(
+            f"{path}: not valid JSON ({exc.__class__.__name__}: {str(exc).splitlines()[0]})"
+        ) from None
     return tree_from_dict(doc, str(path))
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from rich.console import Console
+from rich.markup import escape
 from rich.tree import Tree as RichTree
 
 from smccli.colours import colour_name, dominant_rgb
@@ -21,8 +22,10 @@ def describe_perception(smc: Smc, params: PerceptionParams | None = None) -> str
     c = smc.perception.cluster
     if c is not None:
         ext = "x".join(f"{100 * e:.0f}" for e in c.extents)
-        parts.append(f"{_colour(c, params or PerceptionParams())} object {ext} cm at "
-                     f"({c.centroid[0]:.2f}, {c.centroid[1]:.2f})")
+        parts.append(
+            f"{_colour(c, params or PerceptionParams())} object {ext} cm at "
+            f"({c.centroid[0]:.2f}, {c.centroid[1]:.2f})"
+        )
     if smc.perception.weight is not None:
         parts.append(f"weight {1000 * smc.perception.weight:.0f} g")
     return ", ".join(parts) or "nothing localized"
@@ -33,8 +36,10 @@ def describe_action(smc: Smc) -> str:
     a = smc.action
     g = a.goal
     where = "rel. object" if a.goal_frame == "object" else "world"
-    return (f"{a.event} | goal ({g[0]:+.3f}, {g[1]:+.3f}, {g[2]:+.3f}) m {where}, "
-            f"{a.dmp.duration:.1f} s")
+    return (
+        f"{a.event} | goal ({g[0]:+.3f}, {g[1]:+.3f}, {g[2]:+.3f}) m {where}, "
+        f"{a.dmp.duration:.1f} s"
+    )
 
 
 def print_tree(tree: Tree, console: Console) -> None:
@@ -45,10 +50,12 @@ def print_tree(tree: Tree, console: Console) -> None:
         node, branch = stack.pop()
         added = []
         for e in tree.children(node):
-            srcs = ", ".join(f"{s.log}@{s.t0:.1f}-{s.t1:.1f}s" for s in e.sources)
+            srcs = escape(", ".join(f"{s.log}@{s.t0:.1f}-{s.t1:.1f}s" for s in e.sources))
             what = describe_perception(e.smc, tree.params.perception)
-            child = branch.add(f"[cyan]{e.id}[/] -> [bold]{e.child}[/]  {what}  ||  "
-                               f"{describe_action(e.smc)}  [dim]support {e.support}: {srcs}[/]")
+            child = branch.add(
+                f"[cyan]{e.id}[/] -> [bold]{e.child}[/]  {what}  ||  "
+                f"{describe_action(e.smc)}  [dim]support {e.support}: {srcs}[/]"
+            )
             added.append((e.child, child))
         stack.extend(reversed(added))
     console.print(root)

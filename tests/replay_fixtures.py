@@ -12,8 +12,11 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 REPO = Path(__file__).resolve().parent.parent
 SCRIPTS = REPO / "sample_logs"
-DEMOS = {"bench_pick": ["demo"], "pick_place": ["demo1", "demo2"],
-         "weigh_sort": ["demo_light", "demo_heavy"]}
+DEMOS = {
+    "bench_pick": ["demo"],
+    "pick_place": ["demo1", "demo2"],
+    "weigh_sort": ["demo_light", "demo_heavy"],
+}
 
 
 def record_demo(scene: str, name: str, out: Path, seed: int = 0) -> Path:
@@ -21,13 +24,17 @@ def record_demo(scene: str, name: str, out: Path, seed: int = 0) -> Path:
     from smccli.record import RecordConfig, record
 
     if not out.exists():
-        record(RecordConfig(scene=scene, script=SCRIPTS / scene / f"{name}.yaml", output=out,
-                            seed=seed))
+        record(
+            RecordConfig(
+                scene=scene, script=SCRIPTS / scene / f"{name}.yaml", output=out, seed=seed
+            )
+        )
     return out
 
 
-def build(root: Path, scene: str, names: list[str] | None = None, *,
-          tag: str = "") -> tuple[list[Path], Path]:
+def build(
+    root: Path, scene: str, names: list[str] | None = None, *, tag: str = ""
+) -> tuple[list[Path], Path]:
     """Record the scene's demos (or ``names``) under ``root`` and compile them; cached."""
     from smccli.compile import compile_logs
 

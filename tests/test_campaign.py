@@ -43,8 +43,15 @@ def test_same_seed_same_results_with_1_and_2_workers(trees):
     two = cp.run_trials(tree, scene, trials=4, seed=3, workers=2)
 
     def key(r: cp.TrialResult) -> tuple:
-        return (r.index, r.outcome, r.success, r.path, r.layout, round(r.duration, 9),
-                round(r.distance, 12))
+        return (
+            r.index,
+            r.outcome,
+            r.success,
+            r.path,
+            r.layout,
+            round(r.duration, 9),
+            round(r.distance, 12),
+        )
 
     assert [key(r) for r in one] == [key(r) for r in two]
     again = cp.run_trials(tree, scene, trials=2, seed=4, workers=1)
@@ -54,20 +61,41 @@ def test_same_seed_same_results_with_1_and_2_workers(trees):
 def test_report_keys_and_min_success_gate(trees, tmp_path):
     report = tmp_path / "campaign.json"
     env = {**os.environ, "MUJOCO_GL": "egl"}
-    args = [PY, "-m", "smccli.cli", "replay", str(trees["bench_pick"]), "--trials", "2",
-            "--seed", "1", "--workers", "1", "--report", str(report)]
-    ok = subprocess.run([*args, "--min-success", "0.5"], capture_output=True, text=True,
-                        env=env, timeout=300)
+    args = [
+        PY,
+        "-m",
+        "smccli.cli",
+        "replay",
+        str(trees["bench_pick"]),
+        "--trials",
+        "2",
+        "--seed",
+        "1",
+        "--workers",
+        "1",
+        "--report",
+        str(report),
+    ]
+    ok = subprocess.run(
+        [*args, "--min-success", "0.5"], capture_output=True, text=True, env=env, timeout=300
+    )
     assert ok.returncode == 0, ok.stderr
     doc = json.loads(report.read_text())
     assert KEYS <= set(doc)
     assert doc["trials"] == 2 and 0 <= doc["ci95"][0] <= doc["success_rate"] <= doc["ci95"][1]
     assert set(doc["latency_ms"]) >= {"p50", "p95"}
-    assert set(doc["failures"]) >= {"no_contingent_smc", "grasp_missed", "object_dropped",
-                                    "placed_outside", "target_unreachable", "timeout"}
+    assert set(doc["failures"]) >= {
+        "no_contingent_smc",
+        "grasp_missed",
+        "object_dropped",
+        "placed_outside",
+        "target_unreachable",
+        "timeout",
+    }
     assert sum(b["trials"] for b in doc["by_band"]) == 2
-    gated = subprocess.run([*args, "--min-success", "1.01"], capture_output=True, text=True,
-                           env=env, timeout=300)
+    gated = subprocess.run(
+        [*args, "--min-success", "1.01"], capture_output=True, text=True, env=env, timeout=300
+    )
     assert gated.returncode == 1 and "below --min-success" in gated.stderr
     assert "Traceback" not in gated.stderr
 

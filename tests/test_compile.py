@@ -18,6 +18,7 @@ from smccli.tree import ROOT, Tree, load_tree
 
 def shape(tree: Tree) -> list:
     """Nested (event, children) of the tree from the root, children in creation order."""
+
     def sub(node: str) -> list:
         return [(e.smc.action.event, sub(e.child)) for e in tree.children(node)]
 
@@ -55,8 +56,11 @@ def check_bench_pick(tree: Tree) -> None:
     assert shape(tree) == BENCH_PICK
 
 
-CHECKS = {"pick_place": check_pick_place, "weigh_sort": check_weigh_sort,
-          "bench_pick": check_bench_pick}
+CHECKS = {
+    "pick_place": check_pick_place,
+    "weigh_sort": check_weigh_sort,
+    "bench_pick": check_bench_pick,
+}
 
 
 @pytest.mark.parametrize("scene", list(CHECKS))
@@ -108,8 +112,9 @@ def test_ground_truth_is_never_read(sample_logs, tmp_path):
         stripped.append(dst)
     compile_logs(sample_logs["weigh_sort"], tmp_path / "with.json")
     compile_logs(stripped, tmp_path / "without.json")
-    assert _edges_without_sources(tmp_path / "with.json") == \
-        _edges_without_sources(tmp_path / "without.json")
+    assert _edges_without_sources(tmp_path / "with.json") == _edges_without_sources(
+        tmp_path / "without.json"
+    )
 
 
 def test_params_differing_from_the_tree_are_refused(sample_logs, reseeded_logs, tmp_path):
@@ -131,8 +136,11 @@ def test_bad_logs_leave_the_tree_untouched(sample_logs, tmp_path):
     garbage.write_bytes(b"this is not an mcap file at all")
     no_depth = tmp_path / "no_depth.mcap"
     strip_topic(sample_logs["pick_place"][0], no_depth, "/camera/depth")
-    for bad, message in [(garbage, "garbage.mcap"), (no_depth, "/camera/depth missing"),
-                         (tmp_path / "absent.mcap", "absent.mcap")]:
+    for bad, message in [
+        (garbage, "garbage.mcap"),
+        (no_depth, "/camera/depth missing"),
+        (tmp_path / "absent.mcap", "absent.mcap"),
+    ]:
         with pytest.raises(LogError, match=message):
             compile_logs([*sample_logs["bench_pick"], bad], out)
         assert out.read_bytes() == before
@@ -142,8 +150,12 @@ def test_cli_error_is_one_line_with_exit_code_2(sample_logs, tmp_path):
     garbage = tmp_path / "garbage.mcap"
     garbage.write_bytes(b"\x89not mcap")
     out = tmp_path / "tree.json"
-    proc = subprocess.run([sys.executable, "-m", "smccli.cli", "compile", str(garbage), "-o",
-                           str(out)], capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "smccli.cli", "compile", str(garbage), "-o", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode == 2
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "garbage.mcap" in lines[0], proc.stderr
@@ -152,10 +164,21 @@ def test_cli_error_is_one_line_with_exit_code_2(sample_logs, tmp_path):
 
 def test_cli_prints_the_tree(sample_logs, tmp_path):
     out = tmp_path / "tree.json"
-    proc = subprocess.run([sys.executable, "-m", "smccli.cli", "compile",
-                           *map(str, sample_logs["bench_pick"]), "-o", str(out)],
-                          capture_output=True, text=True, timeout=300,
-                          env={**__import__("os").environ, "COLUMNS": "200"})
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "smccli.cli",
+            "compile",
+            *map(str, sample_logs["bench_pick"]),
+            "-o",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**__import__("os").environ, "COLUMNS": "200"},
+    )
     assert proc.returncode == 0, proc.stderr
     assert "version 1" in proc.stdout and "e1" in proc.stdout and "e2" in proc.stdout
     assert "white object" in proc.stdout and "orange object" in proc.stdout

@@ -57,9 +57,20 @@ def test_fit_accepts_non_uniform_times():
     assert rms(y_hat[:, :3], y_ref[:, :3]) < 1e-3
 
 
-DIRECTIONS = [np.array(v, dtype=float) for v in
-              [(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1),
-               (1, 1, 1), (-1, 2, -1), (-3, -1, 0.5)]]
+DIRECTIONS = [
+    np.array(v, dtype=float)
+    for v in [
+        (1, 0, 0),
+        (-1, 0, 0),
+        (0, 1, 0),
+        (0, -1, 0),
+        (0, 0, 1),
+        (0, 0, -1),
+        (1, 1, 1),
+        (-1, 2, -1),
+        (-3, -1, 0.5),
+    ]
+]
 
 
 @pytest.mark.parametrize("direction", DIRECTIONS, ids=lambda v: str(v.tolist()))
@@ -124,8 +135,9 @@ def test_retargeted_path_keeps_the_arc(yaw_turn):
     start = np.array([0.3, 0.3, 0.2, -0.5])
     goal = start + np.append([c * d[0] - s * d[1], s * d[0] + c * d[1], d[2]], 0.4)
     _, y_new = rollout(dmp, start=start, goal=goal)
-    assert arc_height(y_new) / np.linalg.norm(goal[:3] - start[:3]) == pytest.approx(ratio,
-                                                                                    rel=0.01)
+    assert arc_height(y_new) / np.linalg.norm(goal[:3] - start[:3]) == pytest.approx(
+        ratio, rel=0.01
+    )
     # The arc stays vertical: no sideways bulge out of the vertical start-goal plane.
     n = np.array([-(goal[1] - start[1]), goal[0] - start[0]])
     assert np.max(np.abs((y_new[:, :2] - start[:2]) @ n)) / np.linalg.norm(n) < 1e-3

@@ -66,8 +66,12 @@ def _simulated_demo(path: Path, *, decisions: bool) -> None:
     start = sim.poi()
     above = np.r_[cube[:2], cube[2] + 0.12, start[3]]
     at = np.r_[cube[:2], cube[2], start[3]]
-    with LogWriter(path, metadata={"scene": scene.name, "operator": "test"},
-                   attachments=scene_attachments(scene), wall_clock_flush=False) as w:
+    with LogWriter(
+        path,
+        metadata={"scene": scene.name, "operator": "test"},
+        attachments=scene_attachments(scene),
+        wall_clock_flush=False,
+    ) as w:
         for k in range(300):
             t = sim.t
             s = min(k / 120, 1.0)
@@ -81,12 +85,18 @@ def _simulated_demo(path: Path, *, decisions: bool) -> None:
             if k in (150, 260):
                 w.write_saliency(SaliencyMark(t, "operator", "approach" if k == 150 else "grasp"))
             if decisions and k in (0, 150):
-                w.write_json(tp.DECISION, t, {
-                    "node": "n0" if k == 0 else "n1",
-                    "candidates": [{"edge": "e1" if k == 0 else "e2", "d_p": 0.02,
-                                    "contingent": True}],
-                    "chosen": "e1" if k == 0 else "e2",
-                    "mapped_goal": (above if k == 0 else at).tolist()})
+                w.write_json(
+                    tp.DECISION,
+                    t,
+                    {
+                        "node": "n0" if k == 0 else "n1",
+                        "candidates": [
+                            {"edge": "e1" if k == 0 else "e2", "d_p": 0.02, "contingent": True}
+                        ],
+                        "chosen": "e1" if k == 0 else "e2",
+                        "mapped_goal": (above if k == 0 else at).tolist(),
+                    },
+                )
             cmd = PoiCommand(t, target, grip)
             w.write_command(cmd)
             sim.step(cmd)
@@ -111,14 +121,25 @@ def _hand_made_tree(log_path: Path, out: Path) -> None:
     hist[1 * params.perception.sat_bins + 2] = 1.0  # orange, saturated
     t = np.array([c.t for c in log.commands])
     y = np.array([c.target for c in log.commands])
-    cube = Cluster(centroid=y[-1, :3].copy(), yaw=0.0, yaw_period=np.pi / 2,
-                   extents=np.array([0.05, 0.05, 0.05]), histogram=hist, n_points=400)
+    cube = Cluster(
+        centroid=y[-1, :3].copy(),
+        yaw=0.0,
+        yaw_period=np.pi / 2,
+        extents=np.array([0.05, 0.05, 0.05]),
+        histogram=hist,
+        n_points=400,
+    )
     chain, sources = [], []
     for (a, b), grip in (((0.0, 1.5), (1.0, 1.0)), ((1.5, 3.0), (1.0, 0.0))):
         sel = (t >= a) & (t <= b)
         d = dmp.fit(t[sel] - t[sel][0], y[sel], params.dmp)
-        action = Action(dmp=d, goal_frame="object", goal=goal_in_object(y[sel][-1], cube),
-                        gripper_start=grip[0], gripper_end=grip[1])
+        action = Action(
+            dmp=d,
+            goal_frame="object",
+            goal=goal_in_object(y[sel][-1], cube),
+            gripper_start=grip[0],
+            gripper_end=grip[1],
+        )
         chain.append(Smc(SalientPerceptions(cluster=cube, weight=0.0), action))
         sources.append(Source(log=log_path.name, sha256=log.sha256, t0=a, t1=b))
     tree = insert_chain(Tree(params=params, scene={"name": "pick_place"}), chain, sources)
@@ -137,8 +158,7 @@ def inputs(tmp_path_factory) -> Inputs:
         tree = root / "pick_place.json"
         compile_logs(demos, tree)
         replay = root / "replay.mcap"
-        run_episode(tree, scene=None, seed=0, layout=None, output=replay, report=None,
-                    force=True)
+        run_episode(tree, scene=None, seed=0, layout=None, output=replay, report=None, force=True)
         weighed = None
         light = SAMPLES / "weigh_sort" / "demo_light.mcap"
         if light.is_file():
@@ -164,7 +184,8 @@ def read_rrd(path: Path) -> dict[str, dict[str, dict]]:
     out: dict[str, dict[str, dict]] = {}
     for store in reader.recordings():
         ents: dict[str, dict] = defaultdict(
-            lambda: {"archetypes": set(), "rows": 0, "columns": defaultdict(list)})
+            lambda: {"archetypes": set(), "rows": 0, "columns": defaultdict(list)}
+        )
         for chunk in reader.stream(store=store):
             e = ents[chunk.entity_path]
             batch = chunk.to_record_batch()
@@ -291,8 +312,13 @@ def test_colours_and_branches(inputs):
 def test_default_save_next_to_the_tree(inputs, tmp_path):
     tree = tmp_path / "t.json"
     tree.write_bytes(inputs.tree.read_bytes())
-    proc = subprocess.run([PY, "-m", "smccli.cli", "inspect", str(tree)], capture_output=True,
-                          text=True, timeout=60, cwd=tmp_path)
+    proc = subprocess.run(
+        [PY, "-m", "smccli.cli", "inspect", str(tree)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=tmp_path,
+    )
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "t.rrd").is_file()
     _check_tree(next(iter(read_rrd(tmp_path / "t.rrd").values())), tree)
@@ -333,9 +359,22 @@ def _free_port() -> int:
 
 def test_serve_answers_and_ctrl_c_stops_everything(inputs, tmp_path):
     port = _free_port()
-    proc = subprocess.Popen([PY, "-m", "smccli.cli", "inspect", str(inputs.tree),
-                             str(inputs.demos[0]), "--serve", "--port", str(port)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            PY,
+            "-m",
+            "smccli.cli",
+            "inspect",
+            str(inputs.tree),
+            str(inputs.demos[0]),
+            "--serve",
+            "--port",
+            str(port),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     children: set[int] = set()
     try:
         # The address is printed once the viewer answers; read it, then ask the port.
@@ -389,11 +428,16 @@ def _bad_inputs(tmp: Path, good_tree: Path, good_log: Path) -> dict[str, tuple[l
 
 def test_bad_tree_or_log_is_one_line_and_exit_code_2(inputs, tmp_path):
     cases = _bad_inputs(tmp_path, inputs.tree, inputs.demos[0])
-    procs = {name: subprocess.Popen([PY, "-m", "smccli.cli", "inspect", *args, "--save",
-                                     str(tmp_path / f"{i}.rrd")],
-                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                    env={**os.environ, "COLUMNS": "400"})
-             for i, (name, (args, _)) in enumerate(cases.items())}
+    procs = {
+        name: subprocess.Popen(
+            [PY, "-m", "smccli.cli", "inspect", *args, "--save", str(tmp_path / f"{i}.rrd")],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "COLUMNS": "400"},
+        )
+        for i, (name, (args, _)) in enumerate(cases.items())
+    }
     for name, p in procs.items():
         out, err = p.communicate(timeout=60)
         lines = err.strip().splitlines()

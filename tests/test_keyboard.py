@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import os
+import queue
 import shutil
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -23,8 +25,11 @@ def display():
     for n in range(90, 140):
         if not os.path.exists(f"/tmp/.X11-unix/X{n}") and not os.path.exists(f"/tmp/.X{n}-lock"):
             break
-    xvfb = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    xvfb = subprocess.Popen(
+        ["Xvfb", f":{n}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     deadline = time.monotonic() + 10
     while not os.path.exists(f"/tmp/.X11-unix/X{n}"):
         assert time.monotonic() < deadline, "Xvfb did not start"
@@ -37,8 +42,12 @@ def display():
 def _window(env: dict, timeout: float = 60.0) -> str:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        found = subprocess.run(["xdotool", "search", "--onlyvisible", "--name", "MuJoCo"], env=env,
-                               capture_output=True, text=True)
+        found = subprocess.run(
+            ["xdotool", "search", "--onlyvisible", "--name", "MuJoCo"],
+            env=env,
+            capture_output=True,
+            text=True,
+        )
         if found.stdout.strip():
             return found.stdout.split()[0]
         time.sleep(0.3)
@@ -50,8 +59,9 @@ def _focus(env: dict, window: str, timeout: float = 20.0) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         subprocess.run(["xdotool", "windowfocus", window], env=env, capture_output=True)
-        got = subprocess.run(["xdotool", "getwindowfocus"], env=env, capture_output=True,
-                             text=True).stdout.strip()
+        got = subprocess.run(
+            ["xdotool", "getwindowfocus"], env=env, capture_output=True, text=True
+        ).stdout.strip()
         if got == window:
             time.sleep(1.0)  # the viewer's event loop polls a few times a second
             return
@@ -61,28 +71,82 @@ def _focus(env: dict, window: str, timeout: float = 20.0) -> None:
 
 def _keys(env: dict, window: str, *keys: str, pause: float = 0.15) -> None:
     for k in keys:
-        subprocess.run(["xdotool", "key", "--window", window, k], env=env, check=True)
+        # XTEST to the focused window: real timestamps (synthetic events sent with
+        # --window all carry time 0, and GLFW then takes a repeated key for auto-repeat).
+        subprocess.run(["xdotool", "key", k], env=env, check=True)
         time.sleep(pause)
+
+
+class Stderr:
+    """The recorder's stderr, read line by line on a thread (so we can wait for a line)."""
+
+    def __init__(self, proc: subprocess.Popen) -> None:
+        self.proc = proc
+        self.lines: queue.Queue[str] = queue.Queue()
+        self.seen: list[str] = []
+        self.thread = threading.Thread(target=self._read, daemon=True)
+        self.thread.start()
+
+    def _read(self) -> None:
+        for line in self.proc.stderr:
+            self.lines.put(line)
+
+    def wait_for(self, text: str, timeout: float = 90.0) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            try:
+                line = self.lines.get(timeout=0.5)
+            except queue.Empty:
+                assert self.proc.poll() is None, "".join(self.seen)
+                continue
+            self.seen.append(line)
+            if text in line:
+                return
+        raise AssertionError(f"never saw {text!r}: " + "".join(self.seen))
+
+    def rest(self) -> str:
+        self.thread.join(timeout=30)
+        while not self.lines.empty():
+            self.seen.append(self.lines.get())
+        return "".join(self.seen)
 
 
 def _record(tmp_path, display):
     out = tmp_path / "kb.mcap"
     env = {**os.environ, "DISPLAY": display, "MUJOCO_GL": "glfw"}
-    proc = subprocess.Popen([sys.executable, "-m", "smccli.cli", "record", "--scene",
-                             "pick_place", "--operator", "keyboard", "-o", str(out)],
-                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "smccli.cli",
+            "record",
+            "--scene",
+            "pick_place",
+            "--operator",
+            "keyboard",
+            "-o",
+            str(out),
+        ],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     return out, env, proc
 
 
 def test_keys_move_the_target_toggle_the_gripper_and_mark(tmp_path, display):
     out, env, proc = _record(tmp_path, display)
+    err = Stderr(proc)
     try:
+        err.wait_for("keyboard operator ready")
         win = _window(env)
         _focus(env, win)
         _keys(env, win, *["Up"] * 5, *["Page_Down"] * 3, "q")
         _keys(env, win, "g", pause=1.5)
         _keys(env, win, "m", "Return")
-        stdout, stderr = proc.communicate(timeout=60)
+        proc.wait(timeout=60)
+        stderr = err.rest()
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -100,11 +164,14 @@ def test_keys_move_the_target_toggle_the_gripper_and_mark(tmp_path, display):
 
 def test_discard_writes_nothing(tmp_path, display):
     out, env, proc = _record(tmp_path, display)
+    err = Stderr(proc)
     try:
+        err.wait_for("keyboard operator ready")
         win = _window(env)
         _focus(env, win)
         _keys(env, win, "Up", "x")
-        _, stderr = proc.communicate(timeout=60)
+        proc.wait(timeout=60)
+        stderr = err.rest()
     finally:
         if proc.poll() is None:
             proc.kill()

@@ -11,29 +11,46 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import SAMPLE_LOGS
 from mcap.reader import make_reader
 
-from conftest import SAMPLE_LOGS
-from smccli.errors import OutputExistsError, ScriptError
+from smccli.errors import OutputExistsError
 from smccli.logs import read_log
 from smccli.record import RecordConfig, record
 
 SCRIPT = SAMPLE_LOGS / "pick_place" / "demo1.yaml"
-PROTO = {"/robot/joint_states", "/robot/poi", "/camera/color", "/camera/depth",
-         "/camera/calibration", "/tf", "/perception/points"}
+PROTO = {
+    "/robot/joint_states",
+    "/robot/poi",
+    "/camera/color",
+    "/camera/depth",
+    "/camera/calibration",
+    "/tf",
+    "/perception/points",
+}
 JSON = {"/teleop/command", "/saliency", "/sim/ground_truth"}
 
 
 def smc(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "smccli.cli", *args], capture_output=True,
-                          text=True, timeout=timeout)
+    return subprocess.run(
+        [sys.executable, "-m", "smccli.cli", *args], capture_output=True, text=True, timeout=timeout
+    )
 
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("rec") / "x.mcap"
-    proc = smc("record", "--scene", "pick_place", "--operator", "script", "--script",
-               str(SCRIPT), "-o", str(out))
+    proc = smc(
+        "record",
+        "--scene",
+        "pick_place",
+        "--operator",
+        "script",
+        "--script",
+        str(SCRIPT),
+        "-o",
+        str(out),
+    )
     assert proc.returncode == 0, proc.stderr
     assert "wrote" in proc.stdout and "/camera/color" in proc.stdout
     return out
@@ -71,7 +88,9 @@ def test_rerun_imports_images_and_points(recorded):
     columns: set[str] = set()
     for chunk in McapReader(str(recorded), timeline_type="duration_ns").stream():
         entity = chunk.entity_path
-        for name in chunk.component_descriptors() if hasattr(chunk, "component_descriptors") else []:
+        for name in (
+            chunk.component_descriptors() if hasattr(chunk, "component_descriptors") else []
+        ):
             columns.add(f"{entity}|{name}")
         columns.add(f"{entity}|{chunk}")
     text = "\n".join(columns)
@@ -82,8 +101,15 @@ def test_rerun_imports_images_and_points(recorded):
 def test_same_script_and_seed_give_the_same_bytes(tmp_path):
     digests = []
     for name in ("a.mcap", "b.mcap"):
-        record(RecordConfig(scene="bench_pick", script=SAMPLE_LOGS / "bench_pick" / "demo.yaml",
-                            seed=3, output=tmp_path / name, reproducible=True))
+        record(
+            RecordConfig(
+                scene="bench_pick",
+                script=SAMPLE_LOGS / "bench_pick" / "demo.yaml",
+                seed=3,
+                output=tmp_path / name,
+                reproducible=True,
+            )
+        )
         digests.append(hashlib.sha256((tmp_path / name).read_bytes()).hexdigest())
     assert digests[0] == digests[1]
 
@@ -93,12 +119,18 @@ def test_existing_output_is_refused(recorded):
         record(RecordConfig(scene="pick_place", script=SCRIPT, output=recorded))
 
 
-@pytest.mark.parametrize("body, message", [
-    ("scene: pick_place\nsteps:\n  - move_to: {object: purple_unicorn}\n", "purple_unicorn"),
-    ("scene: pick_place\nsteps:\n  - move_to: {position: [2.5, 0, 0.2]}\n", "out of the robot's reach"),
-    ("scene: pick_place\nsteps:\n  - fly: {to: moon}\n", "step 0"),
-    ("scene: pick_place\nsteps: [\n", "YAML"),
-])
+@pytest.mark.parametrize(
+    "body, message",
+    [
+        ("scene: pick_place\nsteps:\n  - move_to: {object: purple_unicorn}\n", "purple_unicorn"),
+        (
+            "scene: pick_place\nsteps:\n  - move_to: {position: [2.5, 0, 0.2]}\n",
+            "out of the robot's reach",
+        ),
+        ("scene: pick_place\nsteps:\n  - fly: {to: moon}\n", "step 0"),
+        ("scene: pick_place\nsteps: [\n", "YAML"),
+    ],
+)
 def test_bad_scripts_exit_2_with_one_line_and_no_log(tmp_path, body, message):
     script = tmp_path / "bad.yaml"
     script.write_text(body)
@@ -120,11 +152,23 @@ def test_killed_recorder_loses_at_most_the_last_second(tmp_path):
     """kill -9 a real-time recording: the .part holds everything but the last ~second."""
     out = tmp_path / "killed.mcap"
     part = tmp_path / "killed.mcap.part"
-    proc = subprocess.Popen([sys.executable, "-m", "smccli.cli", "record", "--scene",
-                             "weigh_sort", "--script", str(SAMPLE_LOGS / "weigh_sort" /
-                                                           "demo_light.yaml"),
-                             "--realtime", "-o", str(out)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "smccli.cli",
+            "record",
+            "--scene",
+            "weigh_sort",
+            "--script",
+            str(SAMPLE_LOGS / "weigh_sort" / "demo_light.yaml"),
+            "--realtime",
+            "-o",
+            str(out),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
     deadline = time.monotonic() + 60
     while not part.exists():
         assert time.monotonic() < deadline and proc.poll() is None, "recorder did not start"

@@ -36,14 +36,26 @@ def pick_demo1(tmp_path_factory) -> tuple[list[Path], Path]:
 
 def cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     env = {**os.environ, "MUJOCO_GL": "egl", "COLUMNS": "200"}
-    return subprocess.run([PY, "-m", "smccli.cli", "replay", *args], capture_output=True,
-                          text=True, env=env, cwd=cwd, timeout=300)
+    return subprocess.run(
+        [PY, "-m", "smccli.cli", "replay", *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=cwd,
+        timeout=300,
+    )
 
 
 def decisions_of(result: rp.EpisodeResult) -> list[tuple]:
-    return [(d.nodes, d.chosen, [round(c.d_p, 9) for c in d.candidates],
-             None if d.mapped_goal is None else np.round(d.mapped_goal, 9).tolist())
-            for d in result.decisions]
+    return [
+        (
+            d.nodes,
+            d.chosen,
+            [round(c.d_p, 9) for c in d.candidates],
+            None if d.mapped_goal is None else np.round(d.mapped_goal, 9).tolist(),
+        )
+        for d in result.decisions
+    ]
 
 
 def test_episode_on_a_new_layout_succeeds_and_logs_decisions(bench, tmp_path):
@@ -171,10 +183,16 @@ def test_frontier_keeps_branches_that_differ_only_by_path_shape(bench):
     edges = tree.edges
     # The same demonstration with another path shape (forcing weights x 4): Algorithm 1
     # hangs it as a second branch from the root.
-    chain = [dataclasses.replace(e.smc, action=dataclasses.replace(
-        e.smc.action, dmp=dataclasses.replace(e.smc.action.dmp,
-                                              weights=4 * e.smc.action.dmp.weights)))
-        for e in edges]
+    chain = [
+        dataclasses.replace(
+            e.smc,
+            action=dataclasses.replace(
+                e.smc.action,
+                dmp=dataclasses.replace(e.smc.action.dmp, weights=4 * e.smc.action.dmp.weights),
+            ),
+        )
+        for e in edges
+    ]
     forked = insert_chain(tree, chain, [e.sources[0] for e in edges])
     assert len(forked.children("n0")) == 2
     a, b = forked.children("n0")

@@ -33,8 +33,17 @@ def make_trace(t_end=10.0, closes=(), opens=(), weight_steps=(), marks=(), pause
     for a, b in pauses:
         moving[(t >= a) & (t < b)] = False
     target[:, 0] = np.cumsum(np.where(moving, 0.1 * DT, 0.0))
-    return Trace(t_cmd=t, gripper_cmd=grip, target=target, t_fingers=t, finger_speed=speed,
-                 t_weight=t, weight=weight, marks=tuple(marks), t_end=float(t[-1]))
+    return Trace(
+        t_cmd=t,
+        gripper_cmd=grip,
+        target=target,
+        t_fingers=t,
+        finger_speed=speed,
+        t_weight=t,
+        weight=weight,
+        marks=tuple(marks),
+        t_end=float(t[-1]),
+    )
 
 
 def seg(trace, mode=SegmentMode.markers):
@@ -69,8 +78,9 @@ def test_no_boundary_gives_one_fragment():
 
 
 def test_auto_cuts_at_gripper_and_weight_edges():
-    frags = seg(make_trace(closes=(2.0,), opens=(5.0,), weight_steps=((7.0, 0.3),)),
-                SegmentMode.auto)
+    frags = seg(
+        make_trace(closes=(2.0,), opens=(5.0,), weight_steps=((7.0, 0.3),)), SegmentMode.auto
+    )
     assert [f.cause for f in frags] == ["gripper", "gripper", "weight"]
 
 
@@ -89,8 +99,7 @@ def test_double_press_collapses():
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.floats(0.05, 11.9), max_size=8),
-       st.sampled_from(list(SegmentMode)))
+@given(st.lists(st.floats(0.05, 11.9), max_size=8), st.sampled_from(list(SegmentMode)))
 def test_fragments_tile_time_in_order(marks, mode):
     """Invariants: contiguous, ordered, each at least min_fragment long, inside the log."""
     tr = make_trace(t_end=12.0, closes=(2.0,), opens=(6.0,), marks=sorted(marks))

@@ -29,8 +29,14 @@ def _hist(hot: int, n: int = 39) -> np.ndarray:
 
 
 def _cluster(hot: int, x: float = 0.5, y: float = 0.0, size=(0.05, 0.05, 0.05)) -> Cluster:
-    return Cluster(centroid=np.array([x, y, size[2] / 2]), yaw=0.3, yaw_period=math.pi / 2,
-                   extents=np.array(size), histogram=_hist(hot), n_points=400)
+    return Cluster(
+        centroid=np.array([x, y, size[2] / 2]),
+        yaw=0.3,
+        yaw_period=math.pi / 2,
+        extents=np.array(size),
+        histogram=_hist(hot),
+        n_points=400,
+    )
 
 
 def _path(start, goal, lift: float = 0.1, n: int = 150) -> tuple[np.ndarray, np.ndarray]:
@@ -42,8 +48,13 @@ def _path(start, goal, lift: float = 0.1, n: int = 150) -> tuple[np.ndarray, np.
 
 
 @functools.cache
-def _smc(hot: int | None, goal=(0.5, 0.0, 0.03, 0.3), event=("open", "close"),
-         weight: float | None = None, lift: float = 0.1) -> Smc:
+def _smc(
+    hot: int | None,
+    goal=(0.5, 0.0, 0.03, 0.3),
+    event=("open", "close"),
+    weight: float | None = None,
+    lift: float = 0.1,
+) -> Smc:
     start = np.array([0.3, 0.0, 0.3, 0.0])
     t, y = _path(start, np.array(goal), lift)
     cluster = None if hot is None else _cluster(hot, goal[0], goal[1])
@@ -52,9 +63,16 @@ def _smc(hot: int | None, goal=(0.5, 0.0, 0.03, 0.3), event=("open", "close"),
     if cluster is not None:
         g, frame = goal_in_object(g, cluster), "object"
     grip = {"open": 1.0, "close": 0.0}
-    return Smc(SalientPerceptions(cluster=cluster, weight=weight),
-               Action(dmp=dmp.fit(t, y), goal_frame=frame, goal=g,
-                      gripper_start=grip[event[0]], gripper_end=grip[event[1]]))
+    return Smc(
+        SalientPerceptions(cluster=cluster, weight=weight),
+        Action(
+            dmp=dmp.fit(t, y),
+            goal_frame=frame,
+            goal=g,
+            gripper_start=grip[event[0]],
+            gripper_end=grip[event[1]],
+        ),
+    )
 
 
 def _src(i: int) -> Source:
@@ -86,15 +104,21 @@ def test_object_goal_maps_to_a_moved_and_turned_object():
     cluster = _cluster(3, 0.5, 0.1)
     goal_w = np.array([0.52, 0.11, 0.04, 0.5])
     local = goal_in_object(goal_w, cluster)
-    moved = Cluster(centroid=np.array([0.3, -0.2, 0.025]), yaw=cluster.yaw + 1.0,
-                    yaw_period=cluster.yaw_period, extents=cluster.extents,
-                    histogram=cluster.histogram, n_points=100)
+    moved = Cluster(
+        centroid=np.array([0.3, -0.2, 0.025]),
+        yaw=cluster.yaw + 1.0,
+        yaw_period=cluster.yaw_period,
+        extents=cluster.extents,
+        histogram=cluster.histogram,
+        n_points=100,
+    )
     back = goal_from_object(local, moved, near_yaw=0.5 + 1.0)
     # The offset turned with the object, and the yaw is the demonstrated one + 1 rad.
     off = goal_w[:2] - cluster.centroid[:2]
     c, s = math.cos(1.0), math.sin(1.0)
-    np.testing.assert_allclose(back[:2], moved.centroid[:2] + [c * off[0] - s * off[1],
-                                                               s * off[0] + c * off[1]], atol=1e-9)
+    np.testing.assert_allclose(
+        back[:2], moved.centroid[:2] + [c * off[0] - s * off[1], s * off[0] + c * off[1]], atol=1e-9
+    )
     assert back[3] == pytest.approx(1.5)
 
 
@@ -108,10 +132,16 @@ def test_goal_yaw_uses_symmetry_to_turn_the_wrist_least():
 def test_pick_place_demos_give_two_root_edges():
     # Paper 4.1: same actions on different objects -> two branches from the root.
     tree = Tree(params=PARAMS)
-    tree = insert_chain(tree, [_smc(3), _smc(10, goal=(0.5, 0.3, 0.12, 0.0), event=("close", "open"))],
-                        [_src(1), _src(2)])
-    tree = insert_chain(tree, [_smc(25), _smc(33, goal=(0.5, 0.3, 0.12, 0.0), event=("close", "open"))],
-                        [_src(3), _src(4)])
+    tree = insert_chain(
+        tree,
+        [_smc(3), _smc(10, goal=(0.5, 0.3, 0.12, 0.0), event=("close", "open"))],
+        [_src(1), _src(2)],
+    )
+    tree = insert_chain(
+        tree,
+        [_smc(25), _smc(33, goal=(0.5, 0.3, 0.12, 0.0), event=("close", "open"))],
+        [_src(3), _src(4)],
+    )
     assert len(tree.children(ROOT)) == 2
     assert len(tree.edges) == 4 and len(tree.nodes) == 5
 
@@ -119,10 +149,12 @@ def test_pick_place_demos_give_two_root_edges():
 def test_weigh_sort_demos_share_two_edges_then_branch():
     # Paper 4.3: grasp and weigh merge; the weight sends the rest to different bins.
     def chain(w, bin_y):
-        return [_smc(3, weight=0.0),
-                _smc(12, goal=(0.5, 0.05, 0.09, 0.0), event=("close", "open"), weight=0.0),
-                _smc(3, goal=(0.5, 0.05, 0.025, 0.0), weight=w),
-                _smc(20, goal=(0.4, bin_y, 0.15, 0.0), event=("close", "open"), weight=w)]
+        return [
+            _smc(3, weight=0.0),
+            _smc(12, goal=(0.5, 0.05, 0.09, 0.0), event=("close", "open"), weight=0.0),
+            _smc(3, goal=(0.5, 0.05, 0.025, 0.0), weight=w),
+            _smc(20, goal=(0.4, bin_y, 0.15, 0.0), event=("close", "open"), weight=w),
+        ]
 
     tree = Tree(params=PARAMS)
     tree = insert_chain(tree, chain(0.1, 0.3), [_src(i) for i in range(4)])
@@ -138,14 +170,17 @@ def test_weigh_sort_demos_share_two_edges_then_branch():
 
 
 @settings(max_examples=30, deadline=None)
-@given(st.lists(st.lists(st.sampled_from([3, 10, 25]), min_size=1, max_size=4),
-                min_size=1, max_size=5))
+@given(
+    st.lists(st.lists(st.sampled_from([3, 10, 25]), min_size=1, max_size=4), min_size=1, max_size=5)
+)
 def test_tree_invariants(chains):
     """Every fragment is counted once, supports add up, every chain is a root path."""
     tree = Tree(params=PARAMS)
     n = 0
     for chain in chains:
-        tree = insert_chain(tree, [_smc(h) for h in chain], [_src(n + k) for k in range(len(chain))])
+        tree = insert_chain(
+            tree, [_smc(h) for h in chain], [_src(n + k) for k in range(len(chain))]
+        )
         n += len(chain)
     assert sum(e.support for e in tree.edges) == n
     assert sum(len(e.sources) for e in tree.edges) == n
@@ -178,8 +213,9 @@ def test_match_context_picks_the_most_similar_cluster():
 
 
 def test_file_round_trip_and_digest(tmp_path):
-    tree = insert_chain(Tree(params=PARAMS), [_smc(3), _smc(None, event=("close", "open"))],
-                        [_src(1), _src(2)])
+    tree = insert_chain(
+        Tree(params=PARAMS), [_smc(3), _smc(None, event=("close", "open"))], [_src(1), _src(2)]
+    )
     path = tmp_path / "tree.json"
     save_tree(tree, path)
     back = load_tree(path)
@@ -188,12 +224,15 @@ def test_file_round_trip_and_digest(tmp_path):
     assert not (tmp_path / "tree.json.part").exists()
 
 
-@pytest.mark.parametrize("mutate, message", [
-    (lambda d: d.update(format="other"), "not an smc tree"),
-    (lambda d: d.update(schema_version=99), "schema_version 99"),
-    (lambda d: d["edges"][0].update(support=5), "digest mismatch"),
-    (lambda d: d["edges"][0].pop("action"), "invalid at edges/0"),
-])
+@pytest.mark.parametrize(
+    "mutate, message",
+    [
+        (lambda d: d.update(format="other"), "not an smc tree"),
+        (lambda d: d.update(schema_version=99), "schema_version 99"),
+        (lambda d: d["edges"][0].update(support=5), "digest mismatch"),
+        (lambda d: d["edges"][0].pop("action"), "invalid at edges/0"),
+    ],
+)
 def test_bad_tree_files_are_refused(tmp_path, mutate, message):
     tree = insert_chain(Tree(params=PARAMS), [_smc(3)], [_src(1)])
     doc = tree_to_dict(tree)
