@@ -149,6 +149,20 @@ def pause_cuts(trace: Trace, t0: float, t1: float, min_pause: float = 0.4) -> li
     return cuts
 
 
+def _one_event_per_window(
+    edges: list[tuple[float, str]], window: float
+) -> list[tuple[float, str]]:
+    """Edges closer than ``window`` are one event (a release *is* the scale's step): keep
+    the last, where everything has settled, named after the first (its cause)."""
+    out: list[tuple[float, str]] = []
+    for t, cause in edges:
+        if out and t - out[-1][0] <= window:
+            out[-1] = (t, out[-1][1])
+        else:
+            out.append((t, cause))
+    return out
+
+
 def segment(
     trace: Trace, mode: SegmentMode, *, snap_window: float, min_fragment: float, auto_gap: float
 ) -> list[Fragment]:
@@ -157,9 +171,12 @@ def segment(
     The log's start opens the first fragment; each boundary closes one. Boundaries closer
     than ``min_fragment`` collapse into the later one. No boundary at all: one fragment.
     """
-    edges = sorted(
-        [(t, "gripper") for t in gripper_edges(trace)]
-        + [(t, "weight") for t in weight_edges(trace)]
+    edges = _one_event_per_window(
+        sorted(
+            [(t, "gripper") for t in gripper_edges(trace)]
+            + [(t, "weight") for t in weight_edges(trace)]
+        ),
+        snap_window,
     )
     bounds: list[tuple[float, str]] = []
     if mode in (SegmentMode.markers, SegmentMode.both):

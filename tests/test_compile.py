@@ -13,6 +13,7 @@ import pytest
 from smccli.compile import compile_logs
 from smccli.errors import LogError, TreeError
 from smccli.logs import strip_topic
+from smccli.segmentation import SegmentMode
 from smccli.tree import ROOT, Tree, load_tree
 
 
@@ -194,3 +195,30 @@ def test_truncated_log_compiles_up_to_its_last_whole_chunk(sample_logs, tmp_path
     result = compile_logs([cut], tmp_path / "tree.json", on_warning=warnings.append)
     assert any("cut.mcap" in w and "trunc" in w.lower() for w in warnings), warnings
     assert len(result.tree.edges) >= 1
+
+
+@pytest.mark.parametrize("mode", [SegmentMode.auto, SegmentMode.both])
+@pytest.mark.parametrize("scene", list(CHECKS))
+def test_automatic_segmentation_finds_the_same_structure(sample_logs, tmp_path, scene, mode):
+    """Without the operator's marks, gripper and scale events cut the same fragments."""
+    tree = compile_logs(sample_logs[scene], tmp_path / "tree.json", segment_mode=mode).tree
+    CHECKS[scene](tree)
+
+
+def test_concurrent_compiles_serialise_on_the_lock(sample_logs, reseeded_logs, tmp_path):
+    """Two processes adding different logs to one tree: both land, the file stays valid."""
+    out = tmp_path / "tree.json"
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-m", "smccli.cli", "compile", str(log), "-o", str(out)],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for log in (sample_logs["bench_pick"][0], reseeded_logs[1]["bench_pick"][0])
+    ]
+    for p in procs:
+        assert p.wait(timeout=300) == 0, p.stderr.read()
+    tree = load_tree(out)
+    assert tree.version == 2 and tree.edges[0].support == 2
+    assert not (tmp_path / "tree.json.part").exists()
