@@ -208,21 +208,7 @@ def load_scene_from_text(yaml_text: str, mjcf_text: str) -> Scene:
         mujoco.MjModel.from_xml_string(mjcf_text)
     except ValueError as exc:
         raise SceneError(f"<embedded MJCF>: does not compile: {exc}") from exc
-    objects, camera, scale, poi, success = _parse(raw, "<embedded scene.yaml>")
-    return Scene(
-        name=str(raw["name"]),
-        yaml_path=None,
-        yaml_text=yaml_text,
-        mjcf=mjcf_text,
-        digest=_digest(yaml_text, mjcf_text),
-        objects=objects,
-        camera=camera,
-        scale=scale,
-        poi=poi,
-        success=success,
-        description=str(raw.get("description", "")),
-        variants=_variants(raw, objects, "<embedded scene.yaml>"),
-    )
+    return _scene(raw, yaml_text, mjcf_text, "<embedded scene.yaml>")
 
 
 def nominal_layout(scene: Scene, variant: str | None = None) -> Layout:
@@ -402,6 +388,12 @@ def _build(raw: Mapping[str, Any], yaml_text: str, spec: mujoco.MjSpec, where: s
         raise SceneError(f"{where}: camera {camera.name!r} not in the MJCF")
     if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, poi) < 0:
         raise SceneError(f"{where}: POI site {poi!r} not in the MJCF")
+    return _scene(raw, yaml_text, mjcf, where)
+
+
+def _scene(raw: Mapping[str, Any], yaml_text: str, mjcf: str, where: str) -> Scene:
+    """The Scene a parsed scene file and its model text declare."""
+    objects, camera, scale, poi, success = _parse(raw, where)
     return Scene(
         name=str(raw["name"]),
         yaml_path=None,
