@@ -149,9 +149,7 @@ def pause_cuts(trace: Trace, t0: float, t1: float, min_pause: float = 0.4) -> li
     return cuts
 
 
-def _one_event_per_window(
-    edges: list[tuple[float, str]], window: float
-) -> list[tuple[float, str]]:
+def _one_event_per_window(edges: list[tuple[float, str]], window: float) -> list[tuple[float, str]]:
     """Edges closer than ``window`` are one event (a release *is* the scale's step): keep
     the last, where everything has settled, named after the first (its cause)."""
     out: list[tuple[float, str]] = []
