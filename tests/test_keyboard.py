@@ -9,6 +9,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -135,22 +136,30 @@ def _record(tmp_path, display):
     return out, env, proc
 
 
-def test_keys_move_the_target_toggle_the_gripper_and_mark(tmp_path, display):
+def _drive(tmp_path, display, *presses: tuple[str, ...]) -> tuple[int, str, Path]:
+    """Record with the keyboard operator, pressing each group of keys (1.5 s between
+    groups, so the gripper can close); returns (exit code, stderr, output path)."""
     out, env, proc = _record(tmp_path, display)
     err = Stderr(proc)
     try:
         err.wait_for("keyboard operator ready")
         win = _window(env)
         _focus(env, win)
-        _keys(env, win, *["Up"] * 5, *["Page_Down"] * 3, "q")
-        _keys(env, win, "g", pause=1.5)
-        _keys(env, win, "m", "Return")
+        for group in presses:
+            _keys(env, win, *group)
+            time.sleep(1.5)
         proc.wait(timeout=60)
-        stderr = err.rest()
+        return proc.returncode, err.rest(), out
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert proc.returncode == 0, stderr
+
+
+def test_keys_move_the_target_toggle_the_gripper_and_mark(tmp_path, display):
+    code, stderr, out = _drive(
+        tmp_path, display, ("Up",) * 5 + ("Page_Down",) * 3 + ("q", "g"), ("m", "Return")
+    )
+    assert code == 0, stderr
     log = read_log(out)
     first, last = log.commands[0], log.commands[-1]
     np.testing.assert_allclose(last.target[:3] - first.target[:3], [0.05, 0.0, -0.03], atol=1e-6)
@@ -163,17 +172,6 @@ def test_keys_move_the_target_toggle_the_gripper_and_mark(tmp_path, display):
 
 
 def test_discard_writes_nothing(tmp_path, display):
-    out, env, proc = _record(tmp_path, display)
-    err = Stderr(proc)
-    try:
-        err.wait_for("keyboard operator ready")
-        win = _window(env)
-        _focus(env, win)
-        _keys(env, win, "Up", "x")
-        proc.wait(timeout=60)
-        stderr = err.rest()
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert proc.returncode == 2 and "discarded" in stderr
+    code, stderr, out = _drive(tmp_path, display, ("Up", "x"))
+    assert code == 2 and "discarded" in stderr
     assert not out.exists() and not (tmp_path / "kb.mcap.part").exists()
