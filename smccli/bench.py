@@ -109,7 +109,6 @@ def match_1000(tree: Tree, scene: Scene, n_edges: int = 1000, reps: int = 200) -
     """Match time of one context against a node with ``n_edges`` children (real SMCs)."""
     from smccli.contingency import match_context
     from smccli.perception import clusters_from_frame
-    from smccli.robot_model import RobotModel
     from smccli.sim import Sim
 
     real = list(tree.edges)
@@ -126,9 +125,7 @@ def match_1000(tree: Tree, scene: Scene, n_edges: int = 1000, reps: int = 200) -
     )
     sim = Sim(scene, rp.layout_for(scene, 0))
     frame = sim.render_camera()
-    js = sim.joint_state()
-    geom = RobotModel.from_mjcf(scene.mjcf, js.names).geometry_for(js.position)
-    clusters = clusters_from_frame(frame, geom, tree.params.perception)
+    clusters = clusters_from_frame(frame, sim.robot_geometry(), tree.params.perception)
     sim.close()
     stack = rp.EdgeStack.build(edges)
     times = []

@@ -39,9 +39,8 @@ from smccli.errors import OutputExistsError, SceneError, SmcError, TreeError
 from smccli.params import SmcParams
 from smccli.perception import Cluster, clusters_from_frame
 from smccli.perception.cloud import object_points
-from smccli.robot_model import RobotModel
 from smccli.scene import Layout, Scene, builtin_names, load_scene, sample_layout
-from smccli.sensors import CameraFrame, JointState, PoiCommand
+from smccli.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
 from smccli.sim import Sim
 from smccli.smc import Action, goal_from_object
 from smccli.tree import ROOT, Edge, Tree, load_tree
@@ -125,6 +124,10 @@ class Sensors:
 
     def render_camera(self) -> CameraFrame:
         return self._sim.render_camera()
+
+    def robot_geometry(self) -> RobotGeometry:
+        """The robot's own links from its kinematic model and joint readings (self-filter)."""
+        return self._sim.robot_geometry()
 
 
 # --- matching (eq. 36, 39, 45), vectorised over the candidate edges ------------------------
@@ -454,8 +457,6 @@ class Controller:
         self.tree = tree
         self.params = tree.params
         self.sensors = sensors
-        js = sensors.joint_state()
-        self.robot = RobotModel.from_mjcf(scene.mjcf, tuple(js.names))
         self.on_decision = on_decision
         self.max_time = max_time
         self._stacks: dict[tuple[str, ...], EdgeStack] = {}
@@ -466,8 +467,7 @@ class Controller:
     def perceive(self) -> tuple[CameraFrame, tuple[Cluster, ...], float | None, float]:
         t0 = time.perf_counter()
         frame = self.sensors.render_camera()
-        geom = self.robot.geometry_for(self.sensors.joint_state().position)
-        clusters = clusters_from_frame(frame, geom, self.params.perception)
+        clusters = clusters_from_frame(frame, self.sensors.robot_geometry(), self.params.perception)
         elapsed = time.perf_counter() - t0
         weight = None
         if self.sensors.has_scale:
@@ -752,7 +752,6 @@ class _ReplayLog:
         self.sim = sim
         self.scene = scene
         self.params = tree.params
-        self.robot: RobotModel | None = None
         self.cam_period = 1.0 / scene.camera.rate
         self.gt_period = 0.1
         self.next_cam = self.next_gt = sim.t
@@ -778,10 +777,7 @@ class _ReplayLog:
         self._state()
 
     def on_decision(self, dec: Decision, frame: CameraFrame, _start: np.ndarray) -> None:
-        if self.robot is None:
-            self.robot = RobotModel.from_mjcf(self.scene.mjcf, tuple(self.sim.joint_state().names))
-        geom = self.robot.geometry_for(self.sim.joint_state().position)
-        pts, cols, _ = object_points(frame, geom, self.params.perception)
+        pts, cols, _ = object_points(frame, self.sim.robot_geometry(), self.params.perception)
         self.writer.write_point_cloud(dec.t, pts, cols)
         self.writer.write_json("/smc/decision", dec.t, dec.to_json())
 

@@ -23,8 +23,7 @@ from smccli.controller import (
     poi_pose,
 )
 from smccli.errors import SceneError
-from smccli.robot_model import geometry as robot_geometry
-from smccli.robot_model import robot_body_ids
+from smccli.robot_model import RobotModel
 from smccli.scene import Condition, Layout, ObjectSpec, Scene, nominal_layout
 from smccli.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
 
@@ -86,7 +85,7 @@ class Sim:
         base = self._id(mujoco.mjtObj.mjOBJ_BODY, "arm_base")
         self._robot_geoms = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == base]
         self._renderer: mujoco.Renderer | None = None
-        self._robot_bodies: np.ndarray | None = None
+        self._robot: RobotModel | None = None
         self._last = PoiCommand(0.0, np.zeros(4), 1.0)
         self.reset(layout)
 
@@ -203,12 +202,14 @@ class Sim:
     def robot_geometry(self) -> RobotGeometry:
         """Bounding spheres of the robot's moving links from its own kinematics (self-filter).
 
-        The same function compile applies to logged joint states (:mod:`smccli.robot_model`),
-        so replay perceives exactly as compile did.
+        Computed as compile computes it from logged joint states (a kinematic copy of the
+        robot posed from the joint readings, :mod:`smccli.robot_model`), so replay perceives
+        exactly as compile did.
         """
-        if self._robot_bodies is None:
-            self._robot_bodies = robot_body_ids(self.model, tuple(self._jnames))
-        return robot_geometry(self.model, self.data, self._robot_bodies)
+        js = self.joint_state()
+        if self._robot is None:
+            self._robot = RobotModel.from_mjcf(self.scene.mjcf, js.names)
+        return self._robot.geometry_for(js.position)
 
     # --- camera ------------------------------------------------------------------------
 

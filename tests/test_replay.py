@@ -82,16 +82,13 @@ def test_episode_on_a_new_layout_succeeds_and_logs_decisions(bench, tmp_path):
 
 def test_vectorised_match_equals_match_context(tmp_path_factory, bench):
     from smccli.perception import clusters_from_frame
-    from smccli.robot_model import RobotModel
 
     _, tree_path = build(cache_root(tmp_path_factory), "pick_place")
     for path in (tree_path, bench[1]):
         tree, scene = rp.resolve(path, None)
         sim = Sim(scene, rp.layout_for(scene, 3))
         frame = sim.render_camera()
-        js = sim.joint_state()
-        geom = RobotModel.from_mjcf(scene.mjcf, js.names).geometry_for(js.position)
-        clusters = clusters_from_frame(frame, geom, tree.params.perception)
+        clusters = clusters_from_frame(frame, sim.robot_geometry(), tree.params.perception)
         sim.close()
         for weight in (None, 0.0, 0.3):
             edges = [e for e in tree.edges if (e.smc.perception.weight is None) == (weight is None)]
