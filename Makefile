@@ -12,7 +12,7 @@ export PYOPENGL_PLATFORM ?= egl
 # GLFW for the viewer test.
 DEB_PKGS := libusb-1.0-0 libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri libglfw3 xvfb xdotool
 
-.PHONY: setup system-deps test test-fast demo bench sample-logs lint clean
+.PHONY: setup system-deps test test-fast test-under-load demo bench sample-logs lint clean
 
 $(VENV)/.installed: pyproject.toml
 	@$(MAKE) --no-print-directory system-deps
@@ -39,6 +39,17 @@ system-deps:
 	fi
 
 test: setup
+	$(PY) -m pytest -q
+
+# The suite beside two CPU burners (this machine has 2 cores): no test may depend on the
+# machine's speed. The burners are bounded (timeout) and stopped when the suite ends.
+BURN_S ?= 3600
+test-under-load: setup
+	@set -e; \
+	timeout $(BURN_S) $(PY) -c "while True: pass" & b1=$$!; \
+	timeout $(BURN_S) $(PY) -c "while True: pass" & b2=$$!; \
+	trap 'kill $$b1 $$b2 2>/dev/null || true' EXIT; \
+	echo "two CPU burners running (pids $$b1 $$b2, at most $(BURN_S) s)"; \
 	$(PY) -m pytest -q
 
 test-fast: setup

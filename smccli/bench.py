@@ -21,7 +21,6 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
-import platform  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -31,6 +30,8 @@ import numpy as np  # noqa: E402
 
 from smccli import campaign as cp  # noqa: E402
 from smccli import replay as rp  # noqa: E402
+from smccli.bench_meta import machine  # noqa: E402
+from smccli.outputs import check_output, write_atomic  # noqa: E402
 from smccli.scene import Scene  # noqa: E402
 from smccli.tree import ROOT, Edge, Tree  # noqa: E402
 
@@ -252,16 +253,11 @@ def main(argv: list[str] | None = None) -> int:
         "--out", type=Path, default=REPO / "docs", help="bench_results.json and img/*.png go here"
     )
     args = ap.parse_args(argv)
+    check_output(args.out / "bench_results.json", force=True)  # before an hour of trials
 
     results: dict[str, Any] = {
         "command": "python -m smccli.bench " + " ".join(argv if argv is not None else sys.argv[1:]),
-        "machine": {
-            "cpus": os.cpu_count(),
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "gl": os.environ.get("MUJOCO_GL"),
-        },
-        "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "machine": machine(),
     }
     _log("compiling bench_pick's demonstration")
     tree_path = demo_tree("bench_pick", args.work)
@@ -305,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
     results["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S")
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "bench_results.json"
-    path.write_text(json.dumps(results, indent=1, allow_nan=False) + "\n")
+    write_atomic(path, json.dumps(results, indent=1, allow_nan=False) + "\n")
     b = results["bench_pick"]
     print(
         f"bench_pick: {b['successes']}/{b['trials']} = {100 * b['success_rate']:.2f} % "

@@ -16,13 +16,15 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
-import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from smccli.bench_meta import machine
+from smccli.outputs import write_atomic
 
 ROOT = Path(__file__).resolve().parent.parent
 CACHE = ROOT / "out" / "bench" / "demos"
@@ -156,13 +158,12 @@ def main() -> None:
     t0 = time.perf_counter()
     doc: dict[str, object] = {
         "command": "python -m smccli.bench_compile " + " ".join(sys.argv[1:]),
-        "cpus": os.cpu_count(),
+        "machine": machine(),
         "compile": compile_scaling(args.sizes),
         "separability": separability(args.poses),
     }
     doc["wall_s"] = round(time.perf_counter() - t0, 1)
-    (ROOT / "docs").mkdir(exist_ok=True)
-    (ROOT / "docs" / "bench_compile.json").write_text(json.dumps(doc, indent=1) + "\n")
+    write_atomic(ROOT / "docs" / "bench_compile.json", json.dumps(doc, indent=1) + "\n")
 
 
 if __name__ == "__main__":

@@ -29,7 +29,8 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from smccli.errors import OutputExistsError, SmcError  # noqa: E402
+from smccli.errors import SmcError  # noqa: E402
+from smccli.outputs import check_output, write_atomic  # noqa: E402
 from smccli.replay import OUTCOMES, episode, layout_for, resolve  # noqa: E402
 from smccli.scene import Scene  # noqa: E402
 from smccli.tree import Tree, digest  # noqa: E402
@@ -249,14 +250,18 @@ def run_campaign(
     workers: int = 1,
     report: Path | None = None,
     on_trial: Callable[[int, int], None] | None = None,
-    force: bool = True,
+    force: bool = False,
 ) -> dict[str, Any]:
-    """``smc replay TREE --trials N --seed S --workers W [--report FILE]``: the summary."""
+    """``smc replay TREE --trials N --seed S --workers W [--report FILE]``: the summary.
+
+    The report is checked before the first trial (folder writable; an existing file needs
+    ``force``) and written atomically.
+    """
     if trials <= 0:
         raise SmcError(f"--trials must be positive, found {trials}")
+    if report is not None:
+        check_output(report, force=force)
     t, sc = resolve(tree, scene)
-    if report is not None and Path(report).exists() and not force:
-        raise OutputExistsError(f"{report}: exists (use --force to overwrite)")
     wall0 = time.perf_counter()
     results = run_trials(t, sc, trials=trials, seed=seed, workers=workers, on_trial=on_trial)
     summary = summarize(
@@ -264,7 +269,7 @@ def run_campaign(
     )
     summary["tree"] = None if isinstance(tree, Tree) else str(tree)
     if report is not None:
-        Path(report).write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
+        write_atomic(report, json.dumps(summary, indent=1, allow_nan=False) + "\n")
     return summary
 
 

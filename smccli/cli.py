@@ -103,16 +103,32 @@ def record(
         transient=True,
     ) as progress:
         task = progress.add_task("", total=None)
+        next_line = [1.0]
 
         def status(s) -> None:
-            progress.update(
-                task, description=f"sim {s.t:6.2f} s  msgs {s.messages}  marks {s.marks}"
+            text = (
+                f"sim {s.t:6.2f} s  on disk {s.t_on_disk:6.2f} s  msgs {s.messages}  "
+                f"marks {s.marks}"
             )
+            progress.update(task, description=text)
+            if not err.is_terminal and s.t >= next_line[0]:
+                # No live bar off a terminal: a plain line per simulated second, so logs
+                # and supervisors see how far the recording got and what is safe on disk.
+                err.print(f"recording: {text}", highlight=False, soft_wrap=True)
+                next_line[0] += 1.0
 
         summary = run_record(
             cfg, on_status=status, on_message=lambda m: progress.console.print(escape(m))
         )
     _print_summary(summary)
+    if summary.interrupted:
+        err.print(
+            f"interrupted ({summary.interrupted}): kept {escape(str(summary.path))} with "
+            f"{summary.duration:.1f} s, marked interrupted in its metadata",
+            highlight=False,
+            soft_wrap=True,
+        )
+        raise typer.Exit(130)
 
 
 def _print_summary(summary) -> None:
@@ -235,6 +251,7 @@ def replay(
                 seed=seed,
                 workers=workers or (os.cpu_count() or 1),
                 report=report,
+                force=force,
                 on_trial=on_trial,
             )
         rp.print_campaign(summary, out)
@@ -260,6 +277,7 @@ def inspect(
     spawn: Annotated[bool, typer.Option(help="Open Rerun's native viewer.")] = False,
     serve: Annotated[bool, typer.Option(help="Serve Rerun's web viewer on 127.0.0.1.")] = False,
     port: Annotated[int, typer.Option(help="Web viewer port (with --serve).")] = 9090,
+    force: Annotated[bool, typer.Option(help="Overwrite an existing --save file.")] = False,
 ) -> None:
     """Show the tree and the traces in Rerun."""
     from smccli import inspect as ins
@@ -275,6 +293,7 @@ def inspect(
         spawn=spawn,
         serve=serve,
         port=port,
+        force=force,
         console=out,
         on_warning=lambda m: err.print(f"[yellow]warning:[/] {escape(m)}"),
     )

@@ -21,6 +21,7 @@ from smccli import __version__
 from smccli import dmp as dmp_mod
 from smccli.errors import LogError, TreeError
 from smccli.logs import Log, read_log
+from smccli.outputs import check_output
 from smccli.params import SmcParams, params_to_dict, with_overrides
 from smccli.perception import clusters_from_frame, salient_cluster
 from smccli.robot_model import RobotModel
@@ -120,6 +121,19 @@ def extract_chain(log: Log, params: SmcParams, mode: SegmentMode) -> Chain:
             f"{name}: no saliency marks; the whole log is one fragment (try --segment auto)"
         )
     frags = fragments(log, params, mode)
+    if log.truncated:
+        # Only what a boundary closed is a whole fragment: the rest was cut mid-action.
+        t_end = float(log.poi_t[-1]) if len(log.poi_t) else 0.0
+        if frags[-1].cause == "end":
+            raise LogError(
+                f"{log.path}: truncated at t={t_end:.1f} s before its first fragment "
+                "boundary; no complete fragment to compile"
+            )
+        warnings.append(
+            f"{name}: truncated at t={t_end:.1f} s; compiled {len(frags)} complete "
+            f"fragment(s) up to t={frags[-1].t1:.1f} s, dropped the last "
+            f"{t_end - frags[-1].t1:.1f} s"
+        )
     robot = RobotModel.from_log(log)
     has_scale = len(log.weight) > 0
     smcs: list[Smc] = []
@@ -213,7 +227,9 @@ def compile_logs(
     A log already in the tree is skipped. Parameters that differ from the tree's are
     refused unless ``rebuild``. Any bad log aborts the compile before the file is touched.
     """
-    out = Path(out)
+    # The tree is updated in place by design (Algorithm 1 is incremental); what must hold
+    # before reading any log is that it can be written at all.
+    out = check_output(out, force=True)
     warn = on_warning or (lambda msg: None)
     lock = FileLock(str(out) + ".lock")
     try:

@@ -43,7 +43,7 @@ def main() -> int:
     )
     _smc("compile", str(demo), "-o", str(tree), "--rebuild")
     _smc("replay", str(tree), "--seed", "7", "-o", str(replay), "--report", str(report), "--force")
-    _smc("inspect", str(tree), str(demo), str(replay), "--save", str(OUT / "demo.rrd"))
+    _smc("inspect", str(tree), str(demo), str(replay), "--save", str(OUT / "demo.rrd"), "--force")
     print(f"\ndone: {OUT} (open demo.rrd with `rerun {OUT / 'demo.rrd'}`)")
     return 0
 

@@ -27,7 +27,11 @@ class TreeError(SmcError):
     """A tree file is missing, corrupt, of another schema version or built with other params."""
 
 
-class OutputExistsError(SmcError):
+class OutputError(SmcError):
+    """An output cannot be written: its folder is missing or read-only, or it is a folder."""
+
+
+class OutputExistsError(OutputError):
     """An output file exists and ``--force`` was not given."""
 
 

@@ -42,6 +42,7 @@ import numpy as np
 
 from smccli.colours import colour_name, dominant_rgb
 from smccli.errors import LogError, SmcError
+from smccli.outputs import check_output
 from smccli.tree import ROOT, Edge, Tree, load_tree
 
 APP_ID = "smc"
@@ -91,12 +92,14 @@ def inspect(
     spawn: bool = False,
     serve: bool = False,
     port: int = 9090,
+    force: bool = False,
     console: Any = None,
     on_warning: Callable[[str], None] | None = None,
 ) -> InspectResult:
     """Show ``tree_path`` and ``logs`` in Rerun: write ``save`` (.rrd), spawn or serve a viewer.
 
-    Inputs are all read and checked first: a missing or corrupt tree or log raises
+    The output is checked first (its folder exists and is writable; an existing file needs
+    ``force``), then inputs are all read and checked: a missing or corrupt tree or log raises
     TreeError / LogError (one line naming the file) before anything is written.
     ``serve`` blocks until Ctrl-C, then stops the viewer it started.
     """
@@ -113,6 +116,8 @@ def inspect(
 
             console.print(f"[yellow]warning:[/] {escape(msg)}", highlight=False)
 
+    if save is not None:
+        check_output(save, force=force)
     tree = load_tree(Path(tree_path))
     from smccli.logs import read_log
 
@@ -170,11 +175,7 @@ def write_rrd(
     """Write one .rrd holding a recording per log (the tree in each); returns their ids."""
     import rerun as rr
 
-    out = Path(out)
-    if out.is_dir():
-        raise SmcError(f"{out}: is a directory, expected a .rrd file to write")
-    if not out.parent.exists():
-        raise SmcError(f"{out}: directory {out.parent} does not exist")
+    out = check_output(out, force=True)  # overwriting was the caller's decision
     plan = _recording_plan(tree, logs, tree_name)
     bp = blueprint()
     with tempfile.TemporaryDirectory(prefix="smc-rrd-", dir=out.parent) as tmp:

@@ -10,15 +10,19 @@ finish, so a crash loses at most the last second and never leaves a half-written
 
 from __future__ import annotations
 
+import signal
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from smccli import __version__
-from smccli.errors import OutputExistsError, ScriptError
+from smccli.errors import ScriptError
 from smccli.logs import LogWriter, log_summary
+from smccli.outputs import check_output
 from smccli.scene import Scene, load_scene, nominal_layout, sample_layout
 from smccli.sim import Sim
 
@@ -67,6 +71,8 @@ class RecordStatus:
     """Messages written so far."""
     marks: int
     """Saliency marks so far."""
+    t_on_disk: float = 0.0
+    """Simulation time [s] up to which the log is on disk (survives a crash)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,6 +91,8 @@ class RecordSummary:
     """Topic -> (message count, rate [Hz])."""
     size_bytes: int
     """File size [bytes]."""
+    interrupted: str | None = None
+    """Why the recording stopped early (``SIGINT``, ``SIGTERM``), or None if it finished."""
 
 
 def _metadata(scene: Scene, cfg: RecordConfig, extra: dict[str, str]) -> dict[str, str]:
@@ -115,10 +123,14 @@ def record(
     on_status: Callable[[RecordStatus], None] | None = None,
     on_message: Callable[[str], None] | None = None,
 ) -> RecordSummary:
-    """Record one demonstration into ``cfg.output``; see the module docstring."""
-    out = Path(cfg.output)
-    if out.exists() and not cfg.force:
-        raise OutputExistsError(f"{out}: exists (use --force to overwrite)")
+    """Record one demonstration into ``cfg.output``; see the module docstring.
+
+    SIGINT or SIGTERM (when called from the main thread) end the recording cleanly: the log
+    is kept, marked ``interrupted`` in its ``smc_end`` metadata, and the summary says so.
+    Only the operator's explicit discard, or an error in a teleop script (which re-records
+    the same demonstration), removes the log; any other failure keeps what was recorded.
+    """
+    out = check_output(cfg.output, force=cfg.force)
     scene = load_scene(cfg.scene)
     extra: dict[str, str] = {}
     if cfg.operator == "script":
@@ -144,59 +156,25 @@ def record(
         raise ScriptError(f"unknown operator {cfg.operator!r} (valid: script, keyboard)")
     wall0 = time.perf_counter()
     marks = 0
-    cam_period = 1.0 / scene.camera.rate
-    gt_period = 1.0 / cfg.ground_truth_rate
-    next_cam = next_gt = 0.0
-    tick = 0
     try:
-        with LogWriter(
+        writer = LogWriter(
             out,
             metadata=_metadata(scene, cfg, extra),
             attachments=scene_attachments(scene),
             force=cfg.force,
             wall_clock_flush=not cfg.reproducible,
-        ) as writer:
-            _log_state(writer, sim)
-            frame = sim.render_camera()
-            _log_cloud(writer, sim, frame)  # what the robot saw as the demonstration began
-            t_wall0 = time.perf_counter()
-            while True:
-                t = sim.t
-                if cfg.realtime and cfg.operator == "script":
-                    ahead = t - (time.perf_counter() - t_wall0)
-                    if ahead > 0:
-                        time.sleep(ahead)
-                if t >= next_cam - 1e-9:
-                    frame = sim.render_camera() if t > 0 else frame
-                    writer.write_camera(frame)
-                    next_cam += cam_period
-                if t >= next_gt - 1e-9:
-                    writer.write_ground_truth(t, sim.ground_truth())
-                    next_gt += gt_period
-                step = operator.tick()
-                for mark in step.marks:
-                    writer.write_saliency(mark)
-                    marks += 1
-                if step.marks:  # the scene at each salient moment, for inspection
-                    _log_cloud(writer, sim, frame)
-                if step.done:
-                    break
-                writer.write_command(step.command)
-                sim.step(step.command)
-                _log_state(writer, sim)
-                tick += 1
-                if on_status and tick % 10 == 0:
-                    on_status(
-                        RecordStatus(t=sim.t, messages=sum(writer.counts.values()), marks=marks)
-                    )
-                if sim.t > MAX_DURATION:
-                    raise ScriptError(
-                        f"{cfg.script or 'keyboard'}: recording passed "
-                        f"{MAX_DURATION:.0f} s of simulation time; stopped"
-                    )
-            if getattr(operator, "discarded", False):
-                writer.abort()
-                raise ScriptError("recording discarded by the operator; nothing written")
+        )
+        try:
+            with _stop_requests() as stop:
+                marks = _session(writer, sim, operator, cfg, stop, on_status)
+        except ScriptError:
+            writer.abort()  # the script's fault (or the operator's discard): re-record it
+            raise
+        except BaseException as exc:
+            writer.close(interrupted=f"error: {exc.__class__.__name__}")
+            raise
+        interrupted = stop[0] if stop else None
+        writer.close(interrupted=interrupted)
     finally:
         # The sensor renderer's GL context first, then the viewer: the viewer's thread
         # tears GLFW down, and a context freed after that crashes the process.
@@ -211,7 +189,97 @@ def record(
         fragments=marks,
         topics={k: (int(v["count"]), float(v["rate_hz"])) for k, v in summary["topics"].items()},
         size_bytes=out.stat().st_size,
+        interrupted=interrupted,
     )
+
+
+def _session(
+    writer: LogWriter,
+    sim: Sim,
+    operator: ScriptOperator | KeyboardOperator,
+    cfg: RecordConfig,
+    stop: list[str],
+    on_status: Callable[[RecordStatus], None] | None,
+) -> int:
+    """The recording loop, until the operator is done or ``stop`` holds a signal's name.
+
+    Returns the number of saliency marks written.
+    """
+    marks = 0
+    cam_period = 1.0 / sim.scene.camera.rate
+    gt_period = 1.0 / cfg.ground_truth_rate
+    next_cam = next_gt = 0.0
+    tick = 0
+    _log_state(writer, sim)
+    frame = sim.render_camera()
+    _log_cloud(writer, sim, frame)  # what the robot saw as the demonstration began
+    t_wall0 = time.perf_counter()
+    while not stop:
+        t = sim.t
+        if cfg.realtime and cfg.operator == "script":
+            ahead = t - (time.perf_counter() - t_wall0)
+            if ahead > 0:
+                time.sleep(ahead)
+        if t >= next_cam - 1e-9:
+            frame = sim.render_camera() if t > 0 else frame
+            writer.write_camera(frame)
+            next_cam += cam_period
+        if t >= next_gt - 1e-9:
+            writer.write_ground_truth(t, sim.ground_truth())
+            next_gt += gt_period
+        step = operator.tick()
+        for mark in step.marks:
+            writer.write_saliency(mark)
+            marks += 1
+        if step.marks:  # the scene at each salient moment, for inspection
+            _log_cloud(writer, sim, frame)
+        if step.done:
+            break
+        writer.write_command(step.command)
+        sim.step(step.command)
+        _log_state(writer, sim)
+        tick += 1
+        if on_status and tick % 10 == 0:
+            on_status(
+                RecordStatus(
+                    t=sim.t,
+                    messages=sum(writer.counts.values()),
+                    marks=marks,
+                    t_on_disk=writer.t_on_disk,
+                )
+            )
+        if sim.t > MAX_DURATION:
+            raise ScriptError(
+                f"{cfg.script or 'keyboard'}: recording passed "
+                f"{MAX_DURATION:.0f} s of simulation time; stopped"
+            )
+    if getattr(operator, "discarded", False):
+        raise ScriptError("recording discarded by the operator; nothing written")
+    return marks
+
+
+@contextmanager
+def _stop_requests() -> Iterator[list[str]]:
+    """SIGINT and SIGTERM append their name to the yielded list instead of raising.
+
+    The loop checks the list once per tick, so a signal never lands in the middle of a
+    write and the log can be closed cleanly. Outside the main thread (where Python cannot
+    install handlers) the list stays empty and signals behave as usual.
+    """
+    stop: list[str] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield stop
+        return
+
+    def handler(signum: int, _frame: object) -> None:
+        stop.append(signal.Signals(signum).name)
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield stop
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
 
 
 def _log_state(writer: LogWriter, sim: Sim) -> None:

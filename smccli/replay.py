@@ -35,7 +35,8 @@ import numpy as np
 from smccli.contingency import d_p as d_p_stored
 from smccli.controller import reachable, wrap
 from smccli.dmp import rollout
-from smccli.errors import OutputExistsError, SceneError, SmcError, TreeError
+from smccli.errors import OutputError, SceneError, SmcError, TreeError
+from smccli.outputs import check_output, write_atomic
 from smccli.params import SmcParams
 from smccli.perception import Cluster, clusters_from_frame
 from smccli.perception.cloud import object_points
@@ -879,13 +880,15 @@ def run_episode(
 ) -> EpisodeResult:
     """``smc replay TREE``: one episode on the layout file or the seed's layout (trial 0).
 
-    Raises TreeError/SceneError (exit 2) for a bad tree or scene, OutputExistsError when
-    an output exists without ``force``.
+    Raises TreeError/SceneError (exit 2) for a bad tree or scene, OutputError before any
+    work when an output cannot be written (or exists without ``force``).
     """
-    t, sc = resolve(tree, scene)
+    if output is not None and report is not None and Path(output) == Path(report):
+        raise OutputError(f"{output}: given as both the replay log and the report")
     for out in (output, report):
-        if out is not None and Path(out).exists() and not force:
-            raise OutputExistsError(f"{out}: exists (use --force to overwrite)")
+        if out is not None:
+            check_output(out, force=force)
+    t, sc = resolve(tree, scene)
     if layout is None:
         lay = layout_for(sc, seed)
     elif isinstance(layout, dict):
@@ -901,7 +904,7 @@ def run_episode(
             "seed": seed,
             **result.to_report(),
         }
-        Path(report).write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n")
+        write_atomic(report, json.dumps(doc, indent=1, allow_nan=False) + "\n")
     return result
 
 
@@ -941,6 +944,7 @@ def run_campaign(
     seed: int = 0,
     workers: int = 1,
     report: Path | None = None,
+    force: bool = False,
     on_trial: Callable[[int, int], None] | None = None,
 ) -> dict[str, Any]:
     from smccli.campaign import run_campaign as _run
@@ -952,6 +956,7 @@ def run_campaign(
         seed=seed,
         workers=workers,
         report=report,
+        force=force,
         on_trial=on_trial,
     )
 

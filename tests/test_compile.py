@@ -8,11 +8,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from smccli.compile import compile_logs
 from smccli.errors import LogError, TreeError
-from smccli.logs import strip_topic
+from smccli.logs import read_log, strip_topic
 from smccli.segmentation import SegmentMode
 from smccli.tree import ROOT, Tree, load_tree
 
@@ -195,6 +196,53 @@ def test_truncated_log_compiles_up_to_its_last_whole_chunk(sample_logs, tmp_path
     result = compile_logs([cut], tmp_path / "tree.json", on_warning=warnings.append)
     assert any("cut.mcap" in w and "trunc" in w.lower() for w in warnings), warnings
     assert len(result.tree.edges) >= 1
+    dropped = [w for w in warnings if "complete fragment(s)" in w]
+    assert len(dropped) == 1 and "dropped the last" in dropped[0], warnings
+
+
+def test_truncated_log_keeps_only_complete_fragments(sample_logs, tmp_path):
+    """Cut inside the second fragment: only the first (closed by its mark) is compiled."""
+    src = sample_logs["bench_pick"][0]
+    whole = compile_logs([src], tmp_path / "whole.json")
+    frag1, frag2 = whole.added[0].fragments
+    data = src.read_bytes()
+    warnings: list[str] = []
+    # Find a cut whose last whole chunk lies inside the second fragment.
+    for frac in np.linspace(0.95, 0.3, 14):
+        cut = tmp_path / f"cut{frac:.2f}.mcap"
+        cut.write_bytes(data[: int(len(data) * frac)])
+        t_last = read_log(cut, on_warning=lambda _m: None).poi_t[-1]
+        if frag1.t1 + 0.5 < t_last < frag2.t1 - 0.5:
+            break
+    else:
+        pytest.fail("no cut inside the second fragment")
+    result = compile_logs([cut], tmp_path / "tree.json", on_warning=warnings.append)
+    (chain,) = result.added
+    assert len(chain.fragments) == 1 and chain.fragments[0].t1 == pytest.approx(frag1.t1)
+    assert len(result.tree.edges) == 1
+    note = next(w for w in warnings if "complete fragment(s)" in w)
+    assert f"dropped the last {t_last - frag1.t1:.1f} s" in note, note
+
+
+def test_truncated_log_without_a_boundary_is_an_error(sample_logs, tmp_path):
+    src = sample_logs["bench_pick"][0]
+    whole = compile_logs([src], tmp_path / "whole.json")
+    t_mark = whole.added[0].fragments[0].t1
+    data = src.read_bytes()
+    for frac in np.linspace(0.5, 0.05, 10):
+        cut = tmp_path / "early.mcap"
+        cut.write_bytes(data[: int(len(data) * frac)])
+        try:
+            log = read_log(cut, on_warning=lambda _m: None)
+        except LogError:
+            continue
+        if len(log.poi_t) and log.poi_t[-1] < t_mark - 0.5:
+            break
+    else:
+        pytest.fail("no cut before the first mark")
+    with pytest.raises(LogError, match="no complete fragment"):
+        compile_logs([cut], tmp_path / "tree.json", on_warning=lambda _m: None)
+    assert not (tmp_path / "tree.json").exists()
 
 
 @pytest.mark.parametrize("mode", [SegmentMode.auto, SegmentMode.both])

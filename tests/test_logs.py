@@ -198,7 +198,8 @@ def test_file_passes_mcap_crc_checks_and_lists_schemas(demo: tuple[Path, dict[st
     assert all(
         enc == ("json" if t in tp.JSON_TOPICS else "protobuf") for t, enc in channels.items()
     )
-    assert names == ["smc"] and atts == ["scene.xml"]
+    # "smc" at the start; "smc_end" when closed: how the recording ended
+    assert names == ["smc", "smc_end"] and atts == ["scene.xml"]
 
 
 def test_same_inputs_give_identical_bytes(tmp_path: Path) -> None:

@@ -64,6 +64,8 @@ JSON_TOPICS: dict[str, str] = {
 """JSON topic -> schema file stem in ``schemas/`` (``<stem>.schema.json``)."""
 
 METADATA_NAME = "smc"
+END_METADATA_NAME = "smc_end"
+"""Metadata record written when a recording is closed: ``end`` = complete | interrupted."""
 WORLD = "world"
 DEPTH_SCALE = 1000.0
 """Depth PNG units per metre: 16-bit millimetres, 0 = no return, range up to 65.535 m."""

@@ -25,6 +25,7 @@ from mcap_protobuf.schema import build_file_descriptor_set
 from smccli import __version__
 from smccli.errors import LogError, OutputExistsError
 from smccli.logs import topics as tp
+from smccli.outputs import check_output
 from smccli.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
 
@@ -63,10 +64,13 @@ class LogWriter:
     ) -> None:
         self.path = Path(path)
         self.part = part_path(self.path)
-        if self.path.exists() and not force:
-            raise OutputExistsError(f"{self.path}: exists (use --force to overwrite)")
-        if self.path.is_dir():
-            raise OutputExistsError(f"{self.path}: is a directory")
+        check_output(self.path, force=force)
+        if self.part.exists() and not force:
+            # A killed recorder's file: the only copy of that demonstration.
+            raise OutputExistsError(
+                f"{self.part}: exists (an unfinished recording; keep it with "
+                f"`smc doctor {self.part} --repair OUT`, or use --force to overwrite)"
+            )
         self.flush_period_s = float(flush_period_s)
         self.jpeg_quality = jpeg_quality
         self.counts: dict[str, int] = {}
@@ -76,6 +80,10 @@ class LogWriter:
         self._channels: dict[str, int] = {}
         self._last_t: dict[str, int] = {}
         self._last_flush_log_ns: int | None = None
+        self._max_t_ns = 0
+        """Latest log time written [ns]."""
+        self._on_disk_ns = 0
+        """Latest log time whose chunk has been written out [ns]."""
         self._last_flush_wall = time.monotonic()
         self._file: IO[bytes] = open(self.part, "wb")
         try:
@@ -112,13 +120,22 @@ class LogWriter:
         else:
             self.abort()
 
-    def close(self) -> Path:
-        """Finish the file (summary, index) and rename it to ``path`` atomically."""
+    def close(self, *, interrupted: str | None = None) -> Path:
+        """Finish the file (summary, index) and rename it to ``path`` atomically.
+
+        A metadata record ``smc_end`` says how the recording ended: ``end`` is ``complete``,
+        or ``interrupted`` with ``reason`` (e.g. ``SIGINT``) when ``interrupted`` is given.
+        """
         if self._closed:
             return self.path
         self._stop_thread()
         with self._lock:
             self._closed = True
+            end = {"end": "complete" if interrupted is None else "interrupted"}
+            if interrupted is not None:
+                end["reason"] = interrupted
+            end["last_log_time_s"] = f"{self._max_t_ns / 1e9:.3f}"
+            self._mcap.add_metadata(tp.END_METADATA_NAME, end)
             self._mcap.finish()
             self._file.flush()
             os.fsync(self._file.fileno())
@@ -135,6 +152,11 @@ class LogWriter:
             self._closed = True
             self._file.close()
         self.part.unlink(missing_ok=True)
+
+    @property
+    def t_on_disk(self) -> float:
+        """Log time [s] up to which every message has reached the file (the last chunk end)."""
+        return self._on_disk_ns / 1e9
 
     @property
     def size_bytes(self) -> int:
@@ -162,6 +184,7 @@ class LogWriter:
     def _flush_locked(self) -> None:
         self._mcap.flush()  # ends the chunk and flushes the file object
         self._last_flush_wall = time.monotonic()
+        self._on_disk_ns = self._max_t_ns
 
     # --- low level ---
 
@@ -194,6 +217,7 @@ class LogWriter:
                     f"after {last / 1e9:.9f} s"
                 )
             self._last_t[topic] = t_ns
+            self._max_t_ns = max(self._max_t_ns, t_ns)
             cid = self._channel(topic)
             self._mcap.add_message(cid, log_time=t_ns, data=data, publish_time=t_ns)
             self.counts[topic] = self.counts.get(topic, 0) + 1

@@ -1,0 +1,57 @@
+"""Output files: refused before any work starts when they cannot be written; written atomically.
+
+Every command checks its outputs first (``check_output``), so a long recording or campaign
+never ends in "cannot write" with its work lost, and writes them through ``write_atomic``
+(temp file beside the target, fsync, rename), so a crash never leaves a half-written file
+where a good one was.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+from smccli.errors import OutputError, OutputExistsError
+
+
+def check_output(path: str | os.PathLike[str], *, force: bool = False) -> Path:
+    """Refuse ``path`` as an output unless it can be written: its folder exists and is
+    writable, it is not a folder, and it does not exist (or ``force``).
+
+    Raises OutputExistsError / OutputError naming the file and the problem.
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise OutputError(f"{p}: is a directory, expected a file to write")
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise OutputError(f"{p}: folder {parent} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputError(f"{p}: folder {parent} is not writable")
+    if p.exists():
+        if not force:
+            raise OutputExistsError(f"{p}: exists (use --force to overwrite)")
+        if not os.access(p, os.W_OK):
+            raise OutputError(f"{p}: exists and is not writable")
+    return p
+
+
+def write_atomic(path: str | os.PathLike[str], data: str | bytes) -> Path:
+    """Replace ``path`` with ``data`` atomically: a temp file in the same folder, fsync, rename.
+
+    Readers see the old file or the new one, never a part; the temp file is removed on error.
+    """
+    p = Path(path)
+    raw = data.encode("utf-8") if isinstance(data, str) else data
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=p.parent or ".")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(raw)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, p)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return p
