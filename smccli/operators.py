@@ -15,18 +15,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import cache
 from pathlib import Path
 from typing import Any
 
-import jsonschema
 import numpy as np
-import yaml
 
 from smccli.controller import reachable, wrap
 from smccli.errors import ScriptError
-from smccli.scene import Layout, Scene, nominal_layout, sample_layout, yaml_problem
-from smccli.schemas import load_schema
+from smccli.scene import Layout, Scene, nominal_layout, sample_layout
+from smccli.schemas import SchemaProblem, YamlDocument, check_yaml, key_path, parse_yaml
 from smccli.sensors import PoiCommand, SaliencyMark
 from smccli.sim import Sim
 
@@ -109,11 +106,6 @@ class OperatorOutput:
     """True once every step is finished (the command then holds the last pose)."""
 
 
-@cache
-def _schema() -> dict[str, Any]:
-    return load_schema("teleop_script")
-
-
 def load_script(path: str | Path) -> Script:
     """Read and validate a teleop script; ScriptError names the file, step and line."""
     p = Path(path)
@@ -125,27 +117,11 @@ def load_script(path: str | Path) -> Script:
 
 
 def parse_script(text: str, source: str = "<text>") -> Script:
-    """Parse and validate a teleop script given as YAML text."""
-    try:
-        raw = yaml.safe_load(text)
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-    except yaml.YAMLError as exc:
-        raise ScriptError(f"{source}: not valid YAML: {yaml_problem(exc)}") from exc
-    lines = _step_lines(root)
-    errors = sorted(
-        jsonschema.Draft202012Validator(_schema()).iter_errors(raw),
-        key=lambda e: len(list(e.absolute_path)),
-    )
-    if errors:
-        err = jsonschema.exceptions.best_match(errors)
-        path = list(err.absolute_path)
-        if len(path) >= 2 and path[0] == "steps" and isinstance(path[1], int):
-            i = path[1]
-            line = lines[i] if i < len(lines) else 0
-            raise ScriptError(f"{source}: step {i} (line {line}): {_explain(err, raw['steps'][i])}")
-        where = "/".join(str(x) for x in path) or "top level"
-        raise ScriptError(f"{source}: {where}: {err.message}")
-    steps = tuple(_step(s, i, lines[i]) for i, s in enumerate(raw["steps"]))
+    """Parse and validate a teleop script given as YAML text (``schemas/teleop_script``)."""
+    doc = parse_yaml(text, source, ScriptError)
+    check_yaml(doc, "teleop_script", ScriptError, where=_step_where)
+    raw = doc.data
+    steps = tuple(_step(s, i, doc.line(("steps", i)) or 0) for i, s in enumerate(raw["steps"]))
     return Script(
         source=source,
         text=text,
@@ -157,29 +133,23 @@ def parse_script(text: str, source: str = "<text>") -> Script:
         hesitation=float(raw.get("hesitation", 0.0)),
         speed_variation=float(raw.get("speed_variation", 0.0)),
         description=str(raw.get("description", "")),
-        variant=str(raw["variant"]) if "variant" in raw else None,
+        variant=None if raw.get("variant") is None else str(raw["variant"]),
     )
 
 
-def _explain(err: jsonschema.ValidationError, step: Any) -> str:
-    kinds = ("move_to", "gripper", "mark", "wait")
-    if isinstance(step, dict):
-        keys = [k for k in step if k in kinds]
-        if len(keys) != 1 or len(step) != 1:
-            return f"expected exactly one of {', '.join(kinds)}, found keys {sorted(step)}"
-        kind = keys[0]
-        sub = [e for e in (err.context or []) if kind in e.absolute_path or kind in e.path]
-        detail = jsonschema.exceptions.best_match(sub).message if sub else err.message
-        return f"{kind}: {detail}"
-    return f"expected a mapping with one of {', '.join(kinds)}, found {step!r}"
-
-
-def _step_lines(root: Any) -> list[int]:
-    if isinstance(root, yaml.MappingNode):
-        for key, value in root.value:
-            if key.value == "steps" and isinstance(value, yaml.SequenceNode):
-                return [item.start_mark.line + 1 for item in value.value]
-    return []
+def _step_where(problem: SchemaProblem, doc: YamlDocument) -> str | None:
+    """``step 3 (line 12)`` for a problem inside a step (the wording of :meth:`Step.where`),
+    then the key path within the step and its own line when that differs."""
+    path = problem.path
+    if len(path) < 2 or path[0] != "steps" or not isinstance(path[1], int):
+        return None
+    line = doc.line(path[:2])
+    out = f"step {path[1]} (line {line})"
+    if len(path) > 2:
+        out += f": {key_path(path[2:])}"
+        if problem.line is not None and problem.line != line:
+            out += f" (line {problem.line})"
+    return out
 
 
 def _step(raw: dict[str, Any], index: int, line: int) -> Step:

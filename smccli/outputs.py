@@ -25,10 +25,17 @@ def check_output(path: str | os.PathLike[str], *, force: bool = False) -> Path:
     if p.is_dir():
         raise OutputError(f"{p}: is a directory, expected a file to write")
     parent = p.parent if str(p.parent) else Path(".")
-    if not parent.is_dir():
+    if not parent.exists():
         raise OutputError(f"{p}: folder {parent} does not exist")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise OutputError(f"{p}: folder {parent} is not writable")
+    if not parent.is_dir():
+        raise OutputError(f"{p}: {parent} is not a folder")
+    try:
+        # Probe by creating a file: access(2) says yes to root even where the kernel or a
+        # read-only mount will refuse the write.
+        with tempfile.TemporaryFile(dir=parent):
+            pass
+    except OSError as exc:
+        raise OutputError(f"{p}: folder {parent} is not writable ({exc.strerror})") from None
     if p.exists():
         if not force:
             raise OutputExistsError(f"{p}: exists (use --force to overwrite)")

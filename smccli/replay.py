@@ -40,7 +40,14 @@ from smccli.outputs import check_output, write_atomic
 from smccli.params import SmcParams
 from smccli.perception import Cluster, clusters_from_frame
 from smccli.perception.cloud import object_points
-from smccli.scene import Layout, Scene, builtin_names, load_scene, sample_layout
+from smccli.scene import (
+    Layout,
+    Scene,
+    builtin_names,
+    load_layout_file,
+    load_scene,
+    sample_layout,
+)
 from smccli.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
 from smccli.sim import Sim
 from smccli.smc import Action, goal_from_object
@@ -403,28 +410,8 @@ def layout_for(scene: Scene, seed: int, trial: int = 0) -> Layout:
 
 
 def read_layout(path: Path, scene: Scene) -> Layout:
-    """A layout file: YAML or JSON mapping object -> [x, y, z, yaw]; z may be omitted."""
-    import yaml
-
-    try:
-        raw = yaml.safe_load(Path(path).read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise SceneError(f"{path}: cannot read layout ({exc.__class__.__name__})") from None
-    if not isinstance(raw, dict):
-        raise SceneError(f"{path}: expected a mapping object -> [x, y, z, yaw]")
-    layout: Layout = {}
-    for name, v in raw.items():
-        obj = scene.object(str(name))
-        try:
-            vals = [float(x) for x in v]
-        except (TypeError, ValueError):
-            vals = []
-        if len(vals) == 3:
-            vals = [vals[0], vals[1], obj.pose[2], vals[2]]
-        if len(vals) != 4:
-            raise SceneError(f"{path}: {name}: expected [x, y, z, yaw] or [x, y, yaw], found {v!r}")
-        layout[obj.name] = (vals[0], vals[1], vals[2], vals[3])
-    return layout
+    """A layout file (schemas/layout.schema.json): object -> [x, y, z, yaw] or [x, y, yaw]."""
+    return load_layout_file(path, scene)
 
 
 def equivalent(a: Edge, b: Edge, params: SmcParams) -> bool:

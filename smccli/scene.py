@@ -20,9 +20,9 @@ from typing import Any
 
 import mujoco
 import numpy as np
-import yaml
 
 from smccli.errors import SceneError
+from smccli.schemas import KeyPath, check_yaml, parse_yaml, validate_yaml
 
 SCENES_DIR = Path(__file__).parent / "scenes"
 SHAPES = ("box", "cylinder", "pyramid", "open_box", "scale")
@@ -201,14 +201,27 @@ def load_scene(name_or_path: str | Path) -> Scene:
     return _replace_path(scene, path)
 
 
-def load_scene_from_text(yaml_text: str, mjcf_text: str) -> Scene:
-    """Rebuild a scene from the texts a log embeds (``Scene.yaml_text``, ``Scene.mjcf``)."""
-    raw = _parse_yaml(yaml_text, "<embedded scene.yaml>")
+def load_scene_from_text(yaml_text: str, mjcf_text: str, *, log: str | None = None) -> Scene:
+    """Rebuild a scene from the texts a log embeds (``Scene.yaml_text``, ``Scene.mjcf``).
+
+    ``log``: the log file the texts were attached to; errors are then LogError naming it
+    and the attachment (``demo.mcap: attachment scene.yaml: ...``), else SceneError.
+    """
+    from smccli.errors import LogError
+
+    at_yaml = f"{log}: attachment scene.yaml" if log else "<embedded scene.yaml>"
+    at_xml = f"{log}: attachment scene.xml" if log else "<embedded MJCF>"
     try:
-        mujoco.MjModel.from_xml_string(mjcf_text)
-    except ValueError as exc:
-        raise SceneError(f"<embedded MJCF>: does not compile: {exc}") from exc
-    return _scene(raw, yaml_text, mjcf_text, "<embedded scene.yaml>")
+        raw = _parse_yaml(yaml_text, at_yaml)
+        try:
+            mujoco.MjModel.from_xml_string(mjcf_text)
+        except ValueError as exc:
+            raise SceneError(f"{at_xml}: does not compile: {' '.join(str(exc).split())}") from exc
+        return _scene(raw, yaml_text, mjcf_text, at_yaml)
+    except SceneError as exc:
+        if log is None:
+            raise
+        raise LogError(str(exc)) from exc
 
 
 def nominal_layout(scene: Scene, variant: str | None = None) -> Layout:
@@ -247,6 +260,33 @@ def sample_layout(
     )
 
 
+def load_layout_file(path: str | Path, scene: Scene) -> Layout:
+    """A layout of the user's (``smc replay --layout``): YAML or JSON, checked against
+    ``schemas/layout.schema.json``, mapping object -> ``[x, y, z, yaw]`` [m, m, m, rad] or
+    ``[x, y, yaw]`` (z: the object's nominal height). Objects left out are absent."""
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"{p}: cannot read layout: {exc}") from exc
+    doc = parse_yaml(text, str(p), SceneError)
+    check_yaml(doc, "layout", SceneError)
+    names = [o.name for o in scene.objects]
+    layout: Layout = {}
+    for name, values in doc.data.items():
+        if name not in names:
+            raise SceneError(
+                f"{p}: {doc.where((name,), of_key=True)}: no object {name!r} in scene "
+                f"{scene.name} (objects: {', '.join(names)})"
+            )
+        pose = _vec(values)
+        if len(pose) == 3:  # [x, y, yaw]: z from the scene file
+            pose = (pose[0], pose[1], scene.object(name).pose[2], pose[2])
+        x, y, z, yaw = pose
+        layout[name] = (x, y, z, yaw)
+    return layout
+
+
 def _overlaps(scene: Scene, layout: Layout, gap: float) -> bool:
     objs = [o for o in scene.objects if o.name in layout]
     for i, a in enumerate(objs):
@@ -262,59 +302,58 @@ def _overlaps(scene: Scene, layout: Layout, gap: float) -> bool:
 # --- scene file parsing ---------------------------------------------------------------
 
 
-def yaml_problem(exc: yaml.YAMLError) -> str:
-    """One line for a YAML error: the problem and where (line, column, 1-based)."""
-    mark = getattr(exc, "problem_mark", None)
-    problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-    at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-    return f"{problem}{at}"
-
-
 def _parse_yaml(text: str, where: str) -> dict[str, Any]:
-    try:
-        raw = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise SceneError(f"{where}: not valid YAML: {yaml_problem(exc)}") from exc
-    if not isinstance(raw, dict) or "name" not in raw or "objects" not in raw:
-        raise SceneError(f"{where}: expected a mapping with 'name' and 'objects'")
+    """The scene file's data, checked against ``schemas/scene.schema.json``."""
+    raw: dict[str, Any] = validate_yaml(text, "scene", where, SceneError)
     return raw
 
 
-def _floats(value: Any, n: int, what: str, where: str) -> tuple[float, ...]:
-    try:
-        out = tuple(float(v) for v in value)
-    except (TypeError, ValueError):
-        out = ()
-    if len(out) != n:
-        raise SceneError(f"{where}: {what} must be {n} numbers, found {value!r}")
-    return out
+def _at(yaml_text: str, where: str, path: KeyPath) -> str:
+    """``<file>: <key path> (line n)`` for a problem the schema cannot see."""
+    # Parsed again only when there is a problem to report.
+    return f"{where}: {parse_yaml(yaml_text, where, SceneError).where(path)}"
+
+
+def _vec(values: Any) -> tuple[float, ...]:
+    return tuple(float(v) for v in values)
 
 
 def _parse(
-    raw: Mapping[str, Any], where: str
+    raw: Mapping[str, Any], where: str, yaml_text: str
 ) -> tuple[tuple[ObjectSpec, ...], CameraSpec, str | None, str, tuple[SuccessCriterion, ...]]:
-    objects = []
+    """The objects, camera, scale, POI and success criteria of a schema-valid scene file;
+    SceneError for what the schema cannot check (names that must exist, ordered ranges)."""
+    objects: list[ObjectSpec] = []
     for i, o in enumerate(raw["objects"]):
-        name = o.get("name") if isinstance(o, dict) else None
-        if not name:
-            raise SceneError(f"{where}: objects[{i}] has no name")
-        at = f"{where}: object {name}"
-        shape = o.get("shape")
-        if shape not in SHAPES:
-            raise SceneError(f"{at}: shape {shape!r} unknown (shapes: {', '.join(SHAPES)})")
-        pose = _floats(o.get("pose"), 4, "pose [x, y, z, yaw]", at)
+        name, shape = str(o["name"]), str(o["shape"])
+        if name in (ob.name for ob in objects):
+            raise SceneError(
+                f"{_at(yaml_text, where, ('objects', i, 'name'))}: duplicate object name {name!r}"
+            )
+        x, y, z, yaw = _vec(o["pose"])
         rng = o.get("range") or {}
+        ranges = {}
+        for axis, nominal in (("x", x), ("y", y), ("yaw", yaw)):
+            lo, hi = _vec(rng.get(axis, (nominal, nominal)))
+            if lo > hi:
+                raise SceneError(
+                    f"{_at(yaml_text, where, ('objects', i, 'range', axis))}: "
+                    f"expected [low, high], found low {lo:g} above high {hi:g}"
+                )
+            ranges[axis] = (lo, hi)
+        sx, sy, sz = _vec(o["size"])
+        r, g, b, a = _vec(o.get("rgba", (0.5, 0.5, 0.5, 1.0)))
         objects.append(
             ObjectSpec(
-                name=str(name),
+                name=name,
                 shape=shape,
-                size=_floats(o.get("size"), 3, "size [x, y, z]", at),  # type: ignore[arg-type]
-                rgba=_floats(o.get("rgba", [0.5, 0.5, 0.5, 1]), 4, "rgba", at),  # type: ignore[arg-type]
+                size=(sx, sy, sz),
+                rgba=(r, g, b, a),
                 mass=float(o.get("mass", 0.1)),
-                pose=pose,  # type: ignore[arg-type]
-                range_x=_floats(rng.get("x", [pose[0]] * 2), 2, "range.x", at),  # type: ignore[arg-type]
-                range_y=_floats(rng.get("y", [pose[1]] * 2), 2, "range.y", at),  # type: ignore[arg-type]
-                range_yaw=_floats(rng.get("yaw", [pose[3]] * 2), 2, "range.yaw", at),  # type: ignore[arg-type]
+                pose=(x, y, z, yaw),
+                range_x=ranges["x"],
+                range_y=ranges["y"],
+                range_yaw=ranges["yaw"],
                 fixed=bool(o.get("fixed", shape == "scale")),
                 wall=float(o.get("wall", 0.01)),
             )
@@ -329,53 +368,50 @@ def _parse(
         rate=float(cam.get("rate", 10.0)),
     )
     scale = sensors.get("scale")
-    if scale is not None and scale not in names:
-        raise SceneError(f"{where}: sensors.scale {scale!r} is not an object ({', '.join(names)})")
+    if scale is not None:
+        scales = [o.name for o in objects if o.shape == "scale"]
+        if scale not in scales:
+            raise SceneError(
+                f"{_at(yaml_text, where, ('sensors', 'scale'))}: no object {scale!r} of shape "
+                f"scale (scales: {', '.join(scales) or 'none'})"
+            )
     poi = str((raw.get("robot") or {}).get("poi", "poi"))
     success = []
     for task, crit in (raw.get("success") or {}).items():
         conds: dict[str, tuple[Condition, ...]] = {}
         for key in ("any_of", "none_of"):
             items = []
-            for c in crit.get(key, []) or []:
-                cond = Condition(str(c.get("object")), str(c.get("relation")), str(c.get("target")))
-                if cond.relation not in RELATIONS:
-                    raise SceneError(
-                        f"{where}: success.{task}: relation {cond.relation!r} unknown "
-                        f"(relations: {', '.join(RELATIONS)})"
-                    )
-                for n in (cond.object, cond.target):
-                    if n not in names:
+            for j, c in enumerate(crit.get(key) or ()):
+                for role in ("object", "target"):
+                    if c[role] not in names:
                         raise SceneError(
-                            f"{where}: success.{task}: no object {n!r} "
-                            f"(objects: {', '.join(names)})"
+                            f"{_at(yaml_text, where, ('success', task, key, j, role))}: "
+                            f"no object {c[role]!r} (objects: {', '.join(names)})"
                         )
-                items.append(cond)
+                items.append(Condition(str(c["object"]), str(c["relation"]), str(c["target"])))
             conds[key] = tuple(items)
         success.append(SuccessCriterion(str(task), conds["any_of"], conds["none_of"]))
     return tuple(objects), camera, scale, poi, tuple(success)
 
 
 def _variants(
-    raw: Mapping[str, Any], objects: tuple[ObjectSpec, ...], where: str
+    raw: Mapping[str, Any], objects: tuple[ObjectSpec, ...], where: str, yaml_text: str
 ) -> tuple[tuple[str, tuple[str, ...]], ...]:
-    names = {o.name for o in objects}
+    names = [o.name for o in objects]
     out = []
     for variant, members in (raw.get("variants") or {}).items():
-        if not isinstance(members, list) or not members:
-            raise SceneError(f"{where}: variants.{variant}: expected a list of object names")
-        for n in members:
+        for j, n in enumerate(members):
             if n not in names:
                 raise SceneError(
-                    f"{where}: variants.{variant}: no object {n!r} "
-                    f"(objects: {', '.join(sorted(names))})"
+                    f"{_at(yaml_text, where, ('variants', variant, j))}: "
+                    f"no object {n!r} (objects: {', '.join(names)})"
                 )
         out.append((str(variant), tuple(str(n) for n in members)))
     return tuple(out)
 
 
 def _build(raw: Mapping[str, Any], yaml_text: str, spec: mujoco.MjSpec, where: str) -> Scene:
-    objects, camera, scale, poi, success = _parse(raw, where)
+    objects, camera, scale, poi, success = _parse(raw, where, yaml_text)
     for obj in objects:
         _add_object(spec, obj)
     try:
@@ -393,7 +429,7 @@ def _build(raw: Mapping[str, Any], yaml_text: str, spec: mujoco.MjSpec, where: s
 
 def _scene(raw: Mapping[str, Any], yaml_text: str, mjcf: str, where: str) -> Scene:
     """The Scene a parsed scene file and its model text declare."""
-    objects, camera, scale, poi, success = _parse(raw, where)
+    objects, camera, scale, poi, success = _parse(raw, where, yaml_text)
     return Scene(
         name=str(raw["name"]),
         yaml_path=None,
@@ -406,7 +442,7 @@ def _scene(raw: Mapping[str, Any], yaml_text: str, mjcf: str, where: str) -> Sce
         poi=poi,
         success=success,
         description=str(raw.get("description", "")),
-        variants=_variants(raw, objects, where),
+        variants=_variants(raw, objects, where, yaml_text),
     )
 
 

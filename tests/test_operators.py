@@ -8,6 +8,7 @@ import jsonschema
 import numpy as np
 import pytest
 import yaml
+from test_scene import fields_without_description
 
 from smccli.errors import ScriptError
 from smccli.operators import (
@@ -39,6 +40,12 @@ def test_sample_scripts_are_schema_valid() -> None:
     assert len(SAMPLES) == 5
     for path in SAMPLES:
         jsonschema.validate(yaml.safe_load(path.read_text()), schema)
+        assert load_script(path).steps
+
+
+def test_script_schema_describes_every_field_and_refuses_unknown_keys() -> None:
+    schema = load_schema("teleop_script")
+    assert fields_without_description(schema, schema) == []
 
 
 @pytest.mark.parametrize("path", SAMPLES, ids=lambda p: f"{p.parent.name}/{p.stem}")
@@ -150,6 +157,9 @@ def test_schema_errors_name_step_and_line() -> None:
     assert "step 0 (line 3)" in msg and "move_to" in msg
     assert "not valid YAML" in _err("scene: [\n")
     assert "steps" in _err("scene: pick_place\n")
+    assert _err("scene: pick_place\nsteps: []\n") == (
+        "bad.yaml: steps (line 2): expected at least 1 item, found 0: []"
+    )
     with pytest.raises(ScriptError, match="nothere.yaml"):
         load_script("nothere.yaml")
 
@@ -177,3 +187,57 @@ def test_scene_mismatch() -> None:
     script = parse_script("scene: weigh_sort\nsteps:\n  - wait: 0.1\n")
     with pytest.raises(ScriptError, match="weigh_sort.*pick_place"):
         ScriptOperator(script, Sim(load_scene("pick_place")))
+
+
+@pytest.mark.parametrize(
+    "steps, expected",
+    [
+        (
+            "  - move_to: {object: orange_cube, ofset: [0, 0, 0.1]}\n",
+            "step 0 (line 3): move_to.ofset: unknown key 'ofset' (valid: object, offset, yaw, "
+            "duration)",
+        ),
+        (
+            "  - wait: 1\n  - move_to:\n      object: orange_cube\n      offset: [0, 0, high]\n",
+            "step 1 (line 4): move_to.offset[2] (line 6): expected a number, found 'high'",
+        ),
+        (
+            "  - gripper: 1.5\n",
+            "step 0 (line 3): gripper: expected 'open' or 'close' or a number in [0, 1], found 1.5",
+        ),
+        (
+            "  - move_to: {object: orange_cube, position: [0.4, 0, 0.2]}\n",
+            "step 0 (line 3): move_to: expected exactly one of the keys object, position, "
+            "found object, position",
+        ),
+        (
+            "  - {wait: 1, mark: a}\n",
+            "step 0 (line 3): expected exactly one of the keys move_to, gripper, mark, wait, "
+            "found wait, mark",
+        ),
+        ("  - wait\n", "step 0 (line 3): expected a mapping with one of the keys move_to, "),
+        ("  - wait: -1\n", "step 0 (line 3): wait: expected a number in [0, 60], found -1"),
+    ],
+)
+def test_step_errors_name_the_key_path(steps: str, expected: str) -> None:
+    msg = _err("scene: pick_place\nsteps:\n" + steps)
+    assert msg.startswith("bad.yaml: ") and expected in msg, msg
+
+
+def test_top_level_errors_name_key_and_line() -> None:
+    assert _err("scene: pick_place\nsped: 0.2\nsteps:\n  - wait: 1\n") == (
+        "bad.yaml: sped (line 2): unknown key 'sped' (valid: scene, description, variant, speed, "
+        "yaw_speed, tremor, hesitation, speed_variation, steps)"
+    )
+    assert _err("scene: pick_place\nspeed: fast\nsteps:\n  - wait: 1\n") == (
+        "bad.yaml: speed (line 2): expected a number, found 'fast'"
+    )
+    assert (
+        _err("- wait: 1\n")
+        == "bad.yaml: top level (line 1): expected a mapping, found [{'wait': 1}]"
+    )
+
+
+def test_variant_null_means_the_default() -> None:
+    script = parse_script("scene: pick_place\nvariant: null\nsteps:\n  - wait: 1\n")
+    assert script.variant is None and script.steps[0].line == 4

@@ -2,22 +2,34 @@
 
 from __future__ import annotations
 
+import json
 import math
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
 
+import jsonschema
 import numpy as np
 import pytest
 
 from smccli.controller import reachable
-from smccli.errors import SceneError
+from smccli.errors import SceneError, SmcError
 from smccli.scene import (
+    RELATIONS,
     SCENES_DIR,
+    SHAPES,
     builtin_names,
     list_scenes,
+    load_layout_file,
     load_scene,
     load_scene_from_text,
     nominal_layout,
     sample_layout,
 )
+from smccli.schemas import load_schema, parse_yaml, schema_problem, validate_yaml
 
 SCENES = ["bench_pick", "pick_place", "weigh_sort"]
 
@@ -114,3 +126,296 @@ def test_robot_reaches_every_layout_at_any_yaw(name: str) -> None:
             for z in (grasp_z, grasp_z + 0.15):
                 for yaw in np.linspace(-math.pi, math.pi, 8, endpoint=False):
                     assert reachable(model, np.array([x, y, z, yaw])), (o.name, x, y, z, yaw)
+
+
+# --- the scene file's schema ---------------------------------------------------------------
+
+
+def fields_without_description(schema: Any, root: dict, at: str = "") -> list[str]:
+    """Property schemas without a description (theirs or their ``$ref``'s), and mappings with
+    named keys that accept unknown ones."""
+    out: list[str] = []
+    if isinstance(schema, dict):
+        props = schema.get("properties")
+        if props is not None:
+            if schema.get("additionalProperties") is not False:
+                out.append(f"{at}: additionalProperties is not false")
+            for key, sub in props.items():
+                ref = sub.get("$ref", "#/")[2:]
+                target = root
+                for part in filter(None, ref.split("/")):
+                    target = target[part]
+                if "description" not in sub and "description" not in target:
+                    out.append(f"{at}.{key}: no description")
+        for key, sub in schema.items():
+            if key != "enum":
+                out += fields_without_description(sub, root, f"{at}/{key}")
+    elif isinstance(schema, list):
+        for i, sub in enumerate(schema):
+            out += fields_without_description(sub, root, f"{at}[{i}]")
+    return out
+
+
+@pytest.mark.parametrize("name", ["scene", "layout"])
+def test_schema_is_valid_and_describes_every_field(name: str) -> None:
+    schema = load_schema(name)
+    jsonschema.Draft202012Validator.check_schema(schema)
+    assert fields_without_description(schema, schema) == []
+
+
+def test_scene_schema_enums_are_the_codes() -> None:
+    defs = load_schema("scene")["$defs"]
+    assert tuple(defs["object"]["properties"]["shape"]["enum"]) == SHAPES
+    assert tuple(defs["condition"]["properties"]["relation"]["enum"]) == RELATIONS
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_builtin_scene_files_fit_the_schema(name: str) -> None:
+    path = SCENES_DIR / name / "scene.yaml"
+    assert schema_problem(parse_yaml(path.read_text(), str(path), SceneError), "scene") is None
+
+
+@pytest.fixture
+def user_scene(tmp_path: Path) -> Path:
+    """A copy of pick_place as a user's scene (its MJCF includes ``../robots/arm.xml``)."""
+    shutil.copytree(SCENES_DIR / "pick_place", tmp_path / "mine")
+    shutil.copytree(SCENES_DIR / "robots", tmp_path / "robots")
+    return tmp_path / "mine" / "scene.yaml"
+
+
+def break_scene(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert text.count(old) >= 1, old
+    path.write_text(text.replace(old, new, 1))
+
+
+def line_of(path: Path, needle: str) -> int:
+    """Line (1-based) of the first line holding ``needle``."""
+    lines = path.read_text().splitlines()
+    return next(i + 1 for i, ln in enumerate(lines) if needle in ln)
+
+
+# (old text, new text, key path, line holding, what the message says)
+BROKEN_SCENES = {
+    "wrong type": (
+        "mass: 0.3",
+        "mass: heavy",
+        "objects[2].mass",
+        "mass: heavy",
+        "expected a number, found 'heavy'",
+    ),
+    "unknown key": (
+        "    rgba: [0.5, 0.5, 0.5, 1]",
+        "    colour: [0.5, 0.5, 0.5, 1]",
+        "objects[1].colour",
+        "colour:",
+        "unknown key 'colour' (valid: name, shape, size, rgba, mass, pose, range, fixed, wall)",
+    ),
+    "missing key": (
+        "    pose: [0.58, -0.08, 0.03, -0.4]\n",
+        "",
+        "objects[1]",
+        "name: grey_pyramid",
+        "missing required key 'pose'",
+    ),
+    "bad enum": (
+        "shape: pyramid",
+        "shape: sphere",
+        "objects[1].shape",
+        "shape: sphere",
+        "unknown value 'sphere' (valid: box, cylinder, pyramid, open_box, scale)",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BROKEN_SCENES))
+def test_broken_scene_file_names_key_path_and_line(user_scene: Path, case: str) -> None:
+    old, new, path, holder, what = BROKEN_SCENES[case]
+    break_scene(user_scene, old, new)
+    line = line_of(user_scene, holder)
+    with pytest.raises(SceneError) as info:
+        load_scene(user_scene)
+    assert str(info.value) == f"{user_scene}: {path} (line {line}): {what}"
+
+
+@pytest.mark.parametrize(
+    "old, new, expected",
+    [
+        (
+            "relation: on_top_of",
+            "relation: under",
+            "success.cube_on_green.any_of[0].relation (line 45): "
+            "unknown value 'under' (valid: on_top_of, inside)",
+        ),
+        (
+            "y: [-0.35, -0.05]",
+            "y: [-0.35, abc]",
+            "objects[0].range.y[1] (line 17): expected a number, found 'abc'",
+        ),
+        (
+            "size: [0.05, 0.05, 0.05]",
+            "size: [0.05, 0.05]",
+            "objects[0].size (line 13): expected 3 items, found 2",
+        ),
+        (
+            "size: [0.05, 0.05, 0.05]",
+            "size: [0.05, 0, 0.05]",
+            "objects[0].size[1] (line 13): expected a number > 0, found 0",
+        ),
+        ("width: 320", "width: 320.5", "sensors.camera.width (line 9): expected an integer"),
+        (
+            "description:",
+            "descrption:",
+            "descrption (line 5): unknown key 'descrption' (valid: name, description",
+        ),
+        ("objects:", "objs:", "top level (line 4): missing required key 'objects'"),
+        (
+            "  - name: grey_pyramid",
+            "  - grey_pyramid\n  - name: grey_pyramid",
+            "objects[1] (line 18): expected a mapping, found 'grey_pyramid'",
+        ),
+        (
+            "cube_green: [orange_cube, green_cylinder]",
+            "cube_green: []",
+            "variants.cube_green (line 41): expected at least 1 item, found 0",
+        ),
+        ("name: pick_place", "name: [\n", "not valid YAML: "),
+        (
+            "pose: [0.42, 0.2, 0.04, 0.0]",
+            "pose: [0.42, .inf, 0.04, 0.0]",
+            "objects[2].pose[1] (line 30): expected a finite number, found inf",
+        ),
+        # Checks the schema cannot make, still with the key path and line.
+        (
+            "cube_green: [orange_cube, green_cylinder]",
+            "cube_green: [orange_cube, blue_cylinder]",
+            "variants.cube_green[1] (line 41): no object 'blue_cylinder' (objects: orange_cube, ",
+        ),
+        (
+            "target: yellow_cylinder}",
+            "target: yellow}",
+            "success.pyramid_on_yellow.any_of[0].target (line 47): no object 'yellow'",
+        ),
+        (
+            "x: [0.33, 0.6], y: [-0.35",
+            "x: [0.6, 0.33], y: [-0.35",
+            "objects[0].range.x (line 17): expected [low, high], found low 0.6 above high 0.33",
+        ),
+        (
+            "name: grey_pyramid",
+            "name: orange_cube",
+            "objects[1].name (line 18): duplicate object name 'orange_cube'",
+        ),
+        (
+            "sensors:\n",
+            "sensors:\n  scale: green_cylinder\n",
+            "sensors.scale (line 9): no object 'green_cylinder' of shape scale (scales: none)",
+        ),
+        ("poi: poi}", "poi: hand}", "POI site 'hand' not in the MJCF"),
+    ],
+    ids=lambda v: v if len(v) < 30 else None,
+)
+def test_scene_file_problems(user_scene: Path, old: str, new: str, expected: str) -> None:
+    break_scene(user_scene, old, new)
+    with pytest.raises(SceneError) as info:
+        load_scene(user_scene)
+    msg = str(info.value)
+    assert msg.startswith(f"{user_scene}: ") and "\n" not in msg
+    assert expected in msg, msg
+
+
+def test_user_scene_by_path_loads(user_scene: Path) -> None:
+    scene = load_scene(user_scene)
+    assert scene.name == "pick_place" and scene.yaml_path == user_scene
+    assert scene.objects == load_scene("pick_place").objects
+
+
+def test_validate_yaml_serves_any_schema(tmp_path: Path) -> None:
+    """The helper is generic: a schema name, a source and the error class to raise."""
+
+    class RobotError(SmcError):
+        pass
+
+    data = validate_yaml("a: [1, 2, 3]\n", "layout", "robot.yaml", RobotError)
+    assert data == {"a": [1, 2, 3]}
+    with pytest.raises(
+        RobotError, match=r"^robot\.yaml: b \(line 2\): expected a list, found 'x'$"
+    ):
+        validate_yaml("a: [1, 2, 3]\nb: x\n", "layout", "robot.yaml", RobotError)
+    with pytest.raises(RobotError, match=r"^robot\.yaml: not valid YAML"):
+        validate_yaml("a: [1, 2\n", "layout", "robot.yaml", RobotError)
+    with pytest.raises(RobotError, match="not valid YAML"):  # no arbitrary Python objects
+        validate_yaml("a: !!python/object/apply:os.system [echo]\n", "layout", "r.yaml", RobotError)
+
+
+# --- layout files (smc replay --layout) -------------------------------------------------------
+
+
+def test_layout_file_reads_poses(tmp_path: Path) -> None:
+    scene = load_scene("pick_place")
+    path = tmp_path / "layout.yaml"
+    path.write_text("orange_cube: [0.4, -0.2, 0.025, 0.3]\ngreen_cylinder: [0.45, 0.2, 1.0]\n")
+    layout = load_layout_file(path, scene)
+    assert layout == {
+        "orange_cube": (0.4, -0.2, 0.025, 0.3),
+        "green_cylinder": (0.45, 0.2, scene.object("green_cylinder").pose[2], 1.0),
+    }
+    as_json = tmp_path / "layout.json"
+    as_json.write_text(json.dumps({k: list(v) for k, v in layout.items()}))
+    assert load_layout_file(as_json, scene) == layout
+
+
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        ("orange_cube: [0.4, -0.2]\n", "orange_cube (line 1): expected 3 to 4 items, found 2"),
+        (
+            "orange_cube: [0.4, -0.2, 0, 0]\nblue_whale: [0, 0, 0]\n",
+            "blue_whale (line 2): no object 'blue_whale' in scene pick_place (objects: orange_cube",
+        ),
+        (
+            "orange_cube: [0.4, x, 0.1]\n",
+            "orange_cube[1] (line 1): expected a number, found 'x'",
+        ),
+        ("- [0.4, 0.1, 0.1]\n", "top level (line 1): expected a mapping, found [[0.4"),
+        ("{}\n", "top level (line 1): expected at least 1 entries, found 0"),
+        ("orange_cube: [0.4,\n", "not valid YAML"),
+    ],
+)
+def test_bad_layout_file_names_key_and_line(tmp_path: Path, text: str, expected: str) -> None:
+    path = tmp_path / "layout.yaml"
+    path.write_text(text)
+    with pytest.raises(SceneError) as info:
+        load_layout_file(path, load_scene("pick_place"))
+    msg = str(info.value)
+    assert msg.startswith(f"{path}: ") and expected in msg, msg
+    with pytest.raises(SceneError, match="nothere.yaml: cannot read layout"):
+        load_layout_file(tmp_path / "nothere.yaml", load_scene("pick_place"))
+
+
+# --- through the real command ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize("case", sorted(BROKEN_SCENES))
+def test_record_with_broken_scene_exits_2_with_one_line(
+    user_scene: Path, tmp_path: Path, case: str
+) -> None:
+    old, new, path, holder, what = BROKEN_SCENES[case]
+    break_scene(user_scene, old, new)
+    line = line_of(user_scene, holder)
+    out = tmp_path / "out.mcap"
+    script = Path(__file__).resolve().parents[1] / "sample_logs" / "pick_place" / "demo1.yaml"
+    proc = subprocess.run(
+        [sys.executable, "-m", "smccli.cli", "record", "--scene", str(user_scene)]
+        + ["--script", str(script), "-o", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "COLUMNS": "400"},
+    )
+    assert proc.returncode == 2, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, proc.stderr
+    assert f"{user_scene}: {path} (line {line}): {what}" in lines[0]
+    assert "Traceback" not in proc.stderr
+    assert not out.exists() and not out.with_name("out.mcap.part").exists()
