@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import queue
+import re
 import shutil
 import subprocess
 import sys
@@ -78,6 +79,9 @@ def _keys(env: dict, window: str, *keys: str, pause: float = 0.15) -> None:
         time.sleep(pause)
 
 
+STATUS = re.compile(r"recording: sim\s+([\d.]+) s")
+
+
 class Stderr:
     """The recorder's stderr, read line by line on a thread (so we can wait for a line)."""
 
@@ -85,6 +89,8 @@ class Stderr:
         self.proc = proc
         self.lines: queue.Queue[str] = queue.Queue()
         self.seen: list[str] = []
+        self.sim_t = 0.0
+        """Simulated time [s] of the recorder's last status line (one per simulated second)."""
         self.thread = threading.Thread(target=self._read, daemon=True)
         self.thread.start()
 
@@ -92,18 +98,33 @@ class Stderr:
         for line in self.proc.stderr:
             self.lines.put(line)
 
+    def _next(self, deadline: float) -> str | None:
+        try:
+            line = self.lines.get(timeout=0.5)
+        except queue.Empty:
+            assert self.proc.poll() is None, "".join(self.seen)
+            assert time.monotonic() < deadline, "".join(self.seen)
+            return None
+        self.seen.append(line)
+        m = STATUS.search(line)
+        if m:
+            self.sim_t = float(m.group(1))
+        return line
+
     def wait_for(self, text: str, timeout: float = 90.0) -> None:
         deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            try:
-                line = self.lines.get(timeout=0.5)
-            except queue.Empty:
-                assert self.proc.poll() is None, "".join(self.seen)
-                continue
-            self.seen.append(line)
-            if text in line:
+        while True:
+            line = self._next(deadline)
+            if line is not None and text in line:
                 return
-        raise AssertionError(f"never saw {text!r}: " + "".join(self.seen))
+
+    def wait_sim(self, seconds: float, timeout: float = 300.0) -> None:
+        """Wait until the recorder has simulated ``seconds`` more: what happens in the scene
+        follows simulated time, which a busy machine stretches against the wall clock."""
+        deadline = time.monotonic() + timeout
+        until = self.sim_t + seconds
+        while self.sim_t < until:
+            self._next(deadline)
 
     def rest(self) -> str:
         self.thread.join(timeout=30)
@@ -137,17 +158,19 @@ def _record(tmp_path, display):
 
 
 def _drive(tmp_path, display, *presses: tuple[str, ...]) -> tuple[int, str, Path]:
-    """Record with the keyboard operator, pressing each group of keys (1.5 s between
-    groups, so the gripper can close); returns (exit code, stderr, output path)."""
+    """Record with the keyboard operator, pressing each group of keys (at least 1.5 s of
+    simulation between groups, so the gripper can close); returns (exit code, stderr,
+    output path)."""
     out, env, proc = _record(tmp_path, display)
     err = Stderr(proc)
     try:
         err.wait_for("keyboard operator ready")
         win = _window(env)
         _focus(env, win)
-        for group in presses:
+        for group in presses[:-1]:
             _keys(env, win, *group)
-            time.sleep(1.5)
+            err.wait_sim(2.0)  # status lines come once per simulated second
+        _keys(env, win, *presses[-1])
         proc.wait(timeout=60)
         return proc.returncode, err.rest(), out
     finally:
