@@ -9,6 +9,7 @@ self-filter); ``/sim/ground_truth`` is never read.
 from __future__ import annotations
 
 import datetime as dt
+import json
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -23,12 +24,21 @@ from smccli.errors import LogError, TreeError
 from smccli.logs import Log, read_log
 from smccli.outputs import check_output
 from smccli.params import SmcParams, params_to_dict, with_overrides
-from smccli.perception import clusters_from_frame, salient_cluster
+from smccli.perception import Cluster, clusters_from_frame, salient_cluster, scale_reading
 from smccli.robot_model import RobotModel
 from smccli.segmentation import Fragment, SegmentMode, segment, trace_from_commands
 from smccli.sensors import CameraFrame
-from smccli.smc import Action, SalientPerceptions, Smc, Source, goal_in_object
-from smccli.tree import Tree, insert_chain, load_tree, save_tree
+from smccli.smc import (
+    TWO_PI,
+    Action,
+    SalientPerceptions,
+    Smc,
+    Source,
+    approach_in_frame,
+    goal_in_object,
+    object_yaw,
+)
+from smccli.tree import FORMAT, Tree, insert_chain, load_tree, save_tree
 
 #: Topics every arm log must hold for compile.
 REQUIRED_TOPICS = {
@@ -137,6 +147,7 @@ def extract_chain(log: Log, params: SmcParams, mode: SegmentMode) -> Chain:
     robot = RobotModel.from_log(log)
     has_scale = len(log.weight) > 0
     smcs: list[Smc] = []
+    held = 0.0  # symmetry of the object in the hand: nothing yet
     for k, frag in enumerate(frags):
         frame = _frame_at(log.frames, frag.t0)
         if frame is None:
@@ -147,14 +158,12 @@ def extract_chain(log: Log, params: SmcParams, mode: SegmentMode) -> Chain:
         cluster = None if idx is None else clusters[idx]
         weight = None
         if has_scale:
-            sel = (log.weight_t >= frag.t0 - 1e-6) & (log.weight_t <= frag.t0 + 0.15)
-            w = (
-                log.weight[sel]
-                if sel.any()
-                else log.weight[[int(np.argmin(np.abs(log.weight_t - frag.t0)))]]
-            )
-            weight = float(np.median(w))
-        action = _action(log, frag, cluster, params)
+            weight = scale_reading(log.weight_t, log.weight, frag.t0, params.weight_window)
+        action = _action(log, frag, cluster, held, params)
+        if action.event == "close":  # what the hand holds from here on
+            held = cluster.yaw_period if cluster is not None else 0.0
+        elif action.event == "open":
+            held = 0.0
         if cluster is None and action.event != "none":
             warnings.append(
                 f"{name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends "
@@ -173,8 +182,12 @@ def extract_chain(log: Log, params: SmcParams, mode: SegmentMode) -> Chain:
     )
 
 
-def _action(log: Log, frag: Fragment, cluster, params: SmcParams) -> Action:
-    """Action saliency (3.4): the commanded POI path over the fragment as a DMP."""
+def _action(
+    log: Log, frag: Fragment, cluster: Cluster | None, held_symmetry: float, params: SmcParams
+) -> Action:
+    """Action saliency (3.4): the commanded POI path over the fragment as a DMP, its goal
+    and approach in the salient object's frame; ``held_symmetry`` is that of the object in
+    the hand (see :class:`smccli.smc.Action`)."""
     cmds = [c for c in log.commands if frag.t0 - 1e-6 <= c.t <= frag.t1 + 1e-6]
     if len(cmds) < 3:
         raise LogError(
@@ -189,8 +202,10 @@ def _action(log: Log, frag: Fragment, cluster, params: SmcParams) -> Action:
     goal_world[3] = math.remainder(goal_world[3], 2 * math.pi)
     if cluster is not None:
         goal, frame = goal_in_object(goal_world, cluster), "object"
+        symmetry, frame_yaw = cluster.yaw_period, object_yaw(cluster)
     else:
         goal, frame = goal_world, "world"
+        symmetry, frame_yaw = TWO_PI, 0.0
     grip = np.array([c.gripper for c in cmds])
     switches = np.nonzero(np.abs(np.diff(grip)) > 0.25)[0]
     # The last switch of the gripper command, as a phase of the fragment (1 = at its end).
@@ -202,6 +217,11 @@ def _action(log: Log, frag: Fragment, cluster, params: SmcParams) -> Action:
         gripper_start=float(grip[0]),
         gripper_end=float(grip[-1]),
         gripper_phase=min(max(phase, 1e-3), 1.0),
+        symmetry=symmetry,
+        approach=approach_in_frame(
+            path, frame_yaw, params.approach_length, params.approach_samples
+        ),
+        held_symmetry=held_symmetry,
     )
 
 
@@ -210,6 +230,26 @@ def _required_topics(log: Log) -> set[str]:
     if log.metadata.get("has_scale") == "true":
         needed.add("/scale/weight")
     return needed
+
+
+def _rebuild_base(out: Path) -> tuple[int, tuple[dict, ...]]:
+    """Version and history of the tree a ``--rebuild`` replaces. Its contents are discarded,
+    so a tree an older smc wrote (another schema) is fine; a file that is no smc tree at
+    all is refused, never replaced."""
+    try:
+        old = load_tree(out)
+        return old.version, old.history
+    except TreeError:
+        try:
+            doc = json.loads(out.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError):
+            doc = None
+        if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+            raise
+        version, history = doc.get("version"), doc.get("history")
+        if not (isinstance(version, int) and isinstance(history, list)):
+            return 0, ()
+        return version, tuple(h for h in history if isinstance(h, dict))
 
 
 def compile_logs(
@@ -247,11 +287,11 @@ def compile_logs(
                 )
         else:
             # A rebuild starts a new tree but keeps the version growing and the history.
-            old = load_tree(out) if (out.exists() and rebuild) else None
+            version, history = _rebuild_base(out) if out.exists() else (0, ())
             tree = Tree(
                 params=with_overrides(SmcParams(), list(overrides)),
-                version=old.version if old else 0,
-                history=old.history if old else (),
+                version=version,
+                history=history,
             )
         known = tree.log_digests()
         added: list[Chain] = []

@@ -4,11 +4,13 @@ D_P sums per-sensor distances, each normalised so that 1 means "clearly differen
 clusters by :func:`smccli.perception.d_cluster`, the scale by |dw| / ``weight_scale``.
 Perception sets of different kinds (a cluster on one side only) are never contingent.
 
-D_A is physical, in metres: the distance between the two goals (position, plus
-``yaw_scale`` metres per radian of yaw) plus the DMPs' shape distance (RMS distance of the
-canonical, yaw-aligned rollouts; see docs/dmp.md). The paper's T_hA = 0.02 then reads
-"goals and paths within 2 cm". Actions with different gripper events or goal frames are
-never contingent (D_A = inf).
+D_A is physical, in metres: the distance between the two goals in the salient object's
+frame (position, plus ``yaw_scale`` metres per radian of yaw) plus the RMS distance of the
+two approaches (the paths' last ``approach_length`` metres, relative to the goal), both
+taken at the object's symmetric equivalent that fits best. The paper's T_hA = 0.02 then
+reads "the same goal relative to the object, reached the same way, within 2 cm", whatever
+the layout the demonstrations started from (docs/choices.md). Actions with different
+gripper events or goal frames are never contingent (D_A = inf).
 """
 
 from __future__ import annotations
@@ -23,7 +25,16 @@ import numpy as np
 from smccli import dmp as dmp_mod
 from smccli.params import SmcParams
 from smccli.perception import Cluster, d_cluster
-from smccli.smc import Action, SalientPerceptions, Smc, wrap_angle
+from smccli.smc import (
+    TWO_PI,
+    Action,
+    SalientPerceptions,
+    Smc,
+    common_symmetry,
+    rotate_z,
+    symmetry_rotations,
+    wrap_angle,
+)
 
 INF = math.inf
 
@@ -42,13 +53,58 @@ def d_p(a: SalientPerceptions, b: SalientPerceptions, params: SmcParams) -> floa
     return total
 
 
+@dataclass(frozen=True, slots=True)
+class Alignment:
+    """How two goals compare once the object's symmetry is taken out (part of eq. 29)."""
+
+    goal: float
+    """Goal distance [m]: position + ``yaw_scale`` per radian of yaw (modulo the gripper's pi
+    unless the object has no symmetry)."""
+    approach: float
+    """RMS distance of the two approaches [m] (0 when either has none)."""
+    rotation: float
+    """The rotation of ``b``'s object frame [rad] that gives the least total."""
+
+    @property
+    def total(self) -> float:
+        return self.goal + self.approach
+
+
+def align(a: Action, b: Action, params: SmcParams) -> Alignment:
+    """Compare ``b`` to ``a`` over the rotations that map their (common) object symmetry
+    onto itself, and keep the best: a square cube grasped at +44 degrees and at -44 degrees
+    is the same grasp, seen from a frame that turned by pi/2."""
+    symmetry = common_symmetry(a.symmetry, b.symmetry)
+    # The parallel gripper's pi is free, except around an object that has no symmetry:
+    # there the wrist's pi would put the object's other side in the hand.
+    yaw_period = TWO_PI if symmetry >= TWO_PI - 1e-6 else math.pi
+    n = min(len(a.approach), len(b.approach))
+    best: Alignment | None = None
+    for theta in symmetry_rotations(symmetry):
+        pos = rotate_z(b.goal[:3], theta)
+        goal = float(np.linalg.norm(a.goal[:3] - pos))
+        dyaw = wrap_angle(float(a.goal[3] - b.goal[3] - theta), yaw_period)
+        goal += params.yaw_scale * abs(dyaw)
+        approach = 0.0
+        if n:
+            gap = a.approach[:n] - rotate_z(b.approach[:n], theta)
+            approach = float(np.sqrt(np.mean(np.sum(gap**2, axis=1))))
+        if best is None or goal + approach < best.total - 1e-12:
+            best = Alignment(goal=goal, approach=approach, rotation=float(theta))
+    assert best is not None
+    return best
+
+
 def d_a(a: Action, b: Action, params: SmcParams) -> float:
-    """Inter-action distance D_A (eq. 29) [m]; inf for different gripper events or frames."""
+    """Inter-action distance D_A (eq. 29) [m]; inf for different gripper events or frames.
+
+    The goal relative to the salient perception and the approach to it, compared over the
+    object's symmetric equivalents (:func:`align`); where the action started and how it
+    travelled there (which follow from the layout, not from the action) do not count.
+    """
     if a.event != b.event or a.goal_frame != b.goal_frame:
         return INF
-    goal = float(np.linalg.norm(a.goal[:3] - b.goal[:3]))
-    goal += params.yaw_scale * abs(wrap_angle(float(a.goal[3] - b.goal[3]), math.pi))
-    return goal + dmp_mod.shape_distance(a.dmp, b.dmp)
+    return align(a, b, params).total
 
 
 def c_f(a: Smc, b: Smc, params: SmcParams) -> bool:
@@ -109,8 +165,14 @@ def _mean_cluster(a: Cluster, b: Cluster, wa: float, wb: float) -> Cluster:
     )
 
 
-def merge(a: Smc, b: Smc, support_a: int, support_b: int = 1) -> Smc:
-    """Merge two contingent SMCs: the support-weighted mean of their parameters (3.8)."""
+def merge(
+    a: Smc, b: Smc, support_a: int, support_b: int = 1, params: SmcParams | None = None
+) -> Smc:
+    """Merge two contingent SMCs: the support-weighted mean of their parameters (3.8).
+
+    ``b``'s goal and approach are first turned into ``a``'s symmetric equivalent
+    (:func:`align`), so that the mean is taken between like and like.
+    """
     wa, wb = float(support_a), float(support_b)
     pa, pb = a.perception, b.perception
     cluster = None
@@ -120,8 +182,16 @@ def merge(a: Smc, b: Smc, support_a: int, support_b: int = 1) -> Smc:
     if pa.weight is not None and pb.weight is not None:
         weight = (wa * pa.weight + wb * pb.weight) / (wa + wb)
     aa, ab = a.action, b.action
-    goal = (wa * aa.goal + wb * ab.goal) / (wa + wb)
-    goal[3] = aa.goal[3] + wb / (wa + wb) * wrap_angle(float(ab.goal[3] - aa.goal[3]), math.pi)
+    theta = align(aa, ab, params or SmcParams()).rotation
+    goal_b = np.r_[rotate_z(ab.goal[:3], theta), ab.goal[3] + theta]
+    symmetry = common_symmetry(aa.symmetry, ab.symmetry)
+    yaw_period = TWO_PI if symmetry >= TWO_PI - 1e-6 else math.pi
+    goal = (wa * aa.goal + wb * goal_b) / (wa + wb)
+    goal[3] = wrap_angle(
+        aa.goal[3] + wb / (wa + wb) * wrap_angle(float(goal_b[3] - aa.goal[3]), yaw_period)
+    )
+    n = min(len(aa.approach), len(ab.approach))
+    approach = (wa * aa.approach[:n] + wb * rotate_z(ab.approach[:n], theta)) / (wa + wb)
     action = Action(
         dmp=dmp_mod.merge([aa.dmp, ab.dmp], [wa, wb]),
         goal_frame=aa.goal_frame,
@@ -129,5 +199,8 @@ def merge(a: Smc, b: Smc, support_a: int, support_b: int = 1) -> Smc:
         gripper_start=(wa * aa.gripper_start + wb * ab.gripper_start) / (wa + wb),
         gripper_end=(wa * aa.gripper_end + wb * ab.gripper_end) / (wa + wb),
         gripper_phase=(wa * aa.gripper_phase + wb * ab.gripper_phase) / (wa + wb),
+        symmetry=symmetry,
+        approach=approach.reshape(-1, 3),
+        held_symmetry=max(aa.held_symmetry, ab.held_symmetry),
     )
     return Smc(perception=SalientPerceptions(cluster=cluster, weight=weight), action=action)

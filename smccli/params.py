@@ -26,10 +26,16 @@ class SmcParams:
     """Perception contingency threshold T_hP (eq. 31, 36): D_P below it means the same context."""
     epsilon: float = 0.08
     """Saliency radius of object clusters (eq. 21) [m]: horizontal distance to the POI."""
+    weight_window: float = 0.15
+    """The scale is read as the median over this window ending at the decision point [s]."""
     weight_scale: float = 0.05
     """Weight difference that counts as clearly different (normalises d_P of the scale) [kg]."""
     yaw_scale: float = 0.05
     """Metres of goal distance per radian of goal yaw difference in D_A [m/rad]."""
+    approach_length: float = 0.1
+    """How much of a path's end D_A compares: the last this-many metres before the goal [m]."""
+    approach_samples: int = 20
+    """Points the approach is sampled at, evenly along the path."""
     snap_window: float = 0.5
     """Operator marks snap to a gripper or weight edge this close [s]."""
     min_fragment: float = 0.3

@@ -25,6 +25,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,13 +33,14 @@ from typing import Any
 
 import numpy as np
 
+from smccli.contingency import align
 from smccli.contingency import d_p as d_p_stored
 from smccli.controller import reachable, wrap
 from smccli.dmp import rollout
 from smccli.errors import OutputError, SceneError, SmcError, TreeError
 from smccli.outputs import check_output, write_atomic
 from smccli.params import SmcParams
-from smccli.perception import Cluster, clusters_from_frame
+from smccli.perception import Cluster, clusters_from_frame, scale_reading
 from smccli.perception.cloud import object_points
 from smccli.scene import (
     Layout,
@@ -50,7 +52,7 @@ from smccli.scene import (
 )
 from smccli.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
 from smccli.sim import Sim
-from smccli.smc import Action, goal_from_object
+from smccli.smc import TWO_PI, Action, goal_from_object
 from smccli.tree import ROOT, Edge, Tree, load_tree
 
 OUTCOMES = (
@@ -78,8 +80,6 @@ MIN_DURATION = 0.5
 """Shortest rollout [s]."""
 FINAL_SETTLE = 1.0
 """Sim time the scene settles at a leaf before scoring [s]."""
-WEIGHT_WINDOW = 0.15
-"""The scale is read as the median over this window at a decision point [s] (as compile)."""
 MIDWAY_PHASE = 0.95
 """A gripper switch before this phase of a fragment happens midway through the rollout."""
 EMPTY_GRIP = 0.08
@@ -415,15 +415,13 @@ def read_layout(path: Path, scene: Scene) -> Layout:
 
 
 def equivalent(a: Edge, b: Edge, params: SmcParams) -> bool:
-    """Two sibling SMCs that differ at most by their path shape: same salient perceptions
-    (D_P < T_hP), gripper event and goal frame, goals within T_hA (position, plus
-    ``yaw_scale`` per radian of yaw modulo pi)."""
+    """Two sibling SMCs that differ at most by their path: same salient perceptions
+    (D_P < T_hP), gripper event and goal frame, goals within T_hA once the object's
+    symmetry is taken out (:func:`smccli.contingency.align`)."""
     pa, pb = a.smc.action, b.smc.action
     if pa.event != pb.event or pa.goal_frame != pb.goal_frame:
         return False
-    gap = float(np.linalg.norm(pa.goal[:3] - pb.goal[:3]))
-    dyaw = abs(math.remainder(float(pa.goal[3] - pb.goal[3]), math.pi))
-    if gap + params.yaw_scale * dyaw >= params.t_ha:
+    if align(pa, pb, params).goal >= params.t_ha:
         return False
     return d_p_stored(a.smc.perception, b.smc.perception, params) < params.t_hp
 
@@ -449,7 +447,8 @@ class Controller:
         self.max_time = max_time
         self._stacks: dict[tuple[str, ...], EdgeStack] = {}
         self._last_cmd = PoiCommand(sensors.t, sensors.poi(), 1.0)
-        self._edge_weights: list[float | None] = []
+        self._weights: deque[tuple[float, float]] = deque()
+        """Recent scale readings (t [s], kg), the last ``weight_window`` of them."""
 
     # perception at a decision point: the same pipeline and instants as compile
     def perceive(self) -> tuple[CameraFrame, tuple[Cluster, ...], float | None, float]:
@@ -459,17 +458,15 @@ class Controller:
         elapsed = time.perf_counter() - t0
         weight = None
         if self.sensors.has_scale:
-            # Compile reads the scale over [t0, t0 + 0.15 s] from the fragment's start, which
-            # is the previous gripper event's command edge: take the readings recorded there,
-            # else (first decision, no gripper event) read them now while holding still.
-            readings = self._edge_weights
-            if not readings:
-                readings = [self.sensors.weight()]
-                for _ in range(round(WEIGHT_WINDOW / self.sensors.control_period)):
-                    self._hold()
-                    readings.append(self.sensors.weight())
-            self._edge_weights = []
-            weight = float(np.median([w for w in readings if w is not None]))
+            # The same instant as compile (scale_reading): the window that ends here, the
+            # decision point, where the last action has settled. At the first decision
+            # there is no history yet: hold still and read it.
+            window = self.params.weight_window
+            while not self._weights or self._weights[0][0] > self.sensors.t - window + 1e-9:
+                self._hold()
+            t_w = np.array([t for t, _ in self._weights])
+            w_w = np.array([w for _, w in self._weights])
+            weight = scale_reading(t_w, w_w, self.sensors.t, window)
         return frame, clusters, weight, elapsed
 
     def stack(self, nodes: tuple[str, ...]) -> EdgeStack:
@@ -510,12 +507,18 @@ class Controller:
 
     def map_goal(self, action: Action, cluster: Cluster | None, start: np.ndarray) -> np.ndarray:
         """Contingent action mapping of the goal (eq. 38-39, 46)."""
+        # A parallel gripper is symmetric under a half turn, so the wrist may take the short
+        # way round, unless the object grasped or held has no symmetry: then the half turn
+        # would put its other side where the demonstration put this one.
+        asymmetric = max(action.held_symmetry, action.symmetry if cluster else 0.0)
+        flip = asymmetric < TWO_PI - 1e-6
         if action.goal_frame == "object" and cluster is not None:
-            goal = goal_from_object(action.goal, cluster, near_yaw=float(start[3]))
+            flip = flip and cluster.yaw_period < TWO_PI - 1e-6
+            goal = goal_from_object(action.goal, cluster, near_yaw=float(start[3]), flip=flip)
         else:
             goal = np.array(action.goal, dtype=float)
-            # A parallel gripper is symmetric under a half turn: turn the short way.
-            goal[3] = start[3] + math.remainder(float(goal[3] - start[3]), math.pi)
+            if flip:
+                goal[3] = start[3] + math.remainder(float(goal[3] - start[3]), math.pi)
         goal[3] = start[3] + wrap(float(goal[3] - start[3]))
         return goal
 
@@ -533,7 +536,14 @@ class Controller:
 
     def _send(self, cmd: PoiCommand) -> None:
         self._last_cmd = cmd
-        self.sensors.step(cmd)
+        s = self.sensors
+        s.step(cmd)
+        if s.has_scale:
+            w = s.weight()
+            if w is not None:
+                self._weights.append((s.t, w))
+            while self._weights and self._weights[0][0] < s.t - 2 * self.params.weight_window:
+                self._weights.popleft()
 
     def execute(
         self, edge: Edge, start: np.ndarray, goal: np.ndarray, duration: float
@@ -560,13 +570,13 @@ class Controller:
             self._send(PoiCommand(s.t, y, grip))
         if midway:
             self._arrive(path[k], grip)
-            self._gripper_event(path[k], end, record_weight=False)
+            self._gripper_event(path[k], end)
             for y in path[k + 1 :]:
                 self._send(PoiCommand(s.t, y, end))
             grip = end
         arrived = self._arrive(goal, grip)
         if a.event != "none" and not midway:
-            self._gripper_event(goal, end, record_weight=True)
+            self._gripper_event(goal, end)
         return ActionTrace(
             edge=edge.id,
             event=a.event,
@@ -586,15 +596,12 @@ class Controller:
             self._send(PoiCommand(s.t, target, grip))
         return bool(np.linalg.norm(s.poi()[:3] - target[:3]) < ARRIVAL_TOLERANCE)
 
-    def _gripper_event(self, target: np.ndarray, opening: float, record_weight: bool) -> None:
+    def _gripper_event(self, target: np.ndarray, opening: float) -> None:
         """Command ``opening`` and wait until the fingers stop, as the scripted operator."""
         s = self.sensors
         still, t_ev = 0, s.t
-        self._edge_weights = [s.weight()] if (s.has_scale and record_weight) else []
         while True:
             self._send(PoiCommand(s.t, target, opening))
-            if record_weight and s.has_scale and s.t - t_ev <= WEIGHT_WINDOW + 1e-9:
-                self._edge_weights.append(s.weight())
             still = 0 if abs(s.gripper_speed()) > 0.02 else still + 1
             el = s.t - t_ev
             if (el > 0.15 and still >= 10) or el > 3.0:

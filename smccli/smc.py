@@ -5,22 +5,33 @@ An SMC is extracted from one fragment [t0, t1] of a demonstration:
 - salient perceptions (3.3) are read at t0, the decision point: the scale's weight (SI,
   always salient) and the object cluster (ML) nearest the POI at t1, if within epsilon;
 - the salient action (3.4) is the commanded POI path over [t0, t1] as a DMP, its goal
-  stored in the salient object's frame when there is one (else in the world), and the
-  gripper command at both ends (a discrete event, not a DMP dimension).
+  stored in the salient object's frame when there is one (else in the world), the
+  approach (the path's last centimetres, relative to the goal, in the same frame), the
+  symmetry of that frame, and the gripper command at both ends (a discrete event, not a
+  DMP dimension).
+
+Object symmetry is a footprint period [rad] (``Cluster.yaw_period``): pi (elongated),
+pi/2 (square), 0 (round: every rotation), 2 pi (none). The parallel gripper adds its own pi.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from smccli import dmp as dmp_mod
 from smccli.dmp import Dmp
 from smccli.perception import Cluster
+
+TWO_PI = 2 * math.pi
+"""The period of no symmetry [rad]."""
+ROUND_STEPS = 72
+"""Rotations tried for a round object (every 5 degrees) when aligning two goals."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -51,6 +62,18 @@ class Action:
     gripper_phase: float = 1.0
     """When the gripper command switched, as a fraction of the fragment's duration in
     (0, 1]; 1 = at the end. A grasp-and-lift fragment closes midway, then lifts."""
+    symmetry: float = TWO_PI
+    """Yaw symmetry of the goal's frame [rad]: the salient object's footprint period (pi,
+    pi/2, 0 = round, 2 pi = none); 2 pi for a world goal. Goals that differ by such a
+    rotation of the object are the same goal."""
+    approach: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    """How the POI came to the goal: the path's last ``approach_length`` metres, relative
+    to the goal and in the goal's frame, sampled evenly along the path from the goal
+    backwards, shape (n, 3) [m]; row 0 is the goal (zeros)."""
+    held_symmetry: float = 0.0
+    """Symmetry [rad] of the object held during the action (the one grasped by the chain's
+    previous action), as ``symmetry``; 0 when nothing asymmetric is held. A held object
+    without symmetry (2 pi) must not be turned by the gripper's pi."""
 
     @property
     def event(self) -> str:
@@ -104,12 +127,50 @@ def goal_in_object(goal_world: np.ndarray, cluster: Cluster) -> np.ndarray:
     )
 
 
-def goal_from_object(goal_obj: np.ndarray, cluster: Cluster, near_yaw: float) -> np.ndarray:
+def symmetry_rotations(period: float) -> np.ndarray:
+    """Rotations about z in [0, 2 pi) [rad] that map an object of footprint symmetry
+    ``period`` onto itself (a round object: every 2 pi / ROUND_STEPS)."""
+    step = TWO_PI / ROUND_STEPS if period <= 0 else period
+    return np.arange(0.0, TWO_PI - 1e-9, step)
+
+
+def common_symmetry(a: float, b: float) -> float:
+    """The symmetry two estimates of one object share [rad]: the coarser one (round, 0,
+    is the finest; none, 2 pi, the coarsest)."""
+    return max(a, b)
+
+
+def rotate_z(v: np.ndarray, angle: float) -> np.ndarray:
+    """Points ``v`` (..., 3) rotated by ``angle`` [rad] about z."""
+    return Rotation.from_euler("z", angle).apply(np.asarray(v, dtype=float))
+
+
+def approach_in_frame(
+    path: np.ndarray, frame_yaw: float, length: float, n_samples: int
+) -> np.ndarray:
+    """The last ``length`` metres of a POI path (T, >=3) before its end (the goal), relative
+    to the goal and turned into a frame of yaw ``frame_yaw`` [rad]: shape (n_samples, 3)
+    [m], sampled evenly along the path from the goal backwards (a path shorter than
+    ``length`` stays at its start). Pauses and speed do not change it."""
+    back = np.asarray(path, dtype=float)[::-1, :3] - np.asarray(path, dtype=float)[-1, :3]
+    seg = np.linalg.norm(np.diff(back, axis=0), axis=1)
+    keep = np.r_[True, seg > 1e-9]  # a still POI adds samples, not length
+    back, arc = back[keep], np.r_[0.0, np.cumsum(seg[seg > 1e-9])]
+    u = np.minimum(np.linspace(0.0, length, n_samples), arc[-1])
+    pts = np.stack([np.interp(u, arc, back[:, k]) for k in range(3)], axis=1)
+    return rotate_z(pts, -frame_yaw)
+
+
+def goal_from_object(
+    goal_obj: np.ndarray, cluster: Cluster, near_yaw: float, *, flip: bool = True
+) -> np.ndarray:
     """Contingent action mapping of the goal (eq. 38-39): object-frame goal -> world.
 
     The footprint's symmetry (``yaw_period``) and the parallel gripper's (pi) leave several
     equivalent goal yaws; the one nearest ``near_yaw`` (the current POI yaw) is taken, so
     the wrist turns as little as possible. The offset turns with the chosen object yaw.
+    ``flip=False`` forbids the gripper's pi: an object without symmetry that is grasped or
+    held keeps its orientation in the hand, so it is not placed turned by pi.
     """
     base = object_yaw(cluster)
     period = cluster.yaw_period if cluster.yaw_period > 0 else math.pi
@@ -118,8 +179,8 @@ def goal_from_object(goal_obj: np.ndarray, cluster: Cluster, near_yaw: float) ->
         obj_yaw = base + k_obj * period
         if cluster.yaw_period <= 0 and k_obj != 0:
             continue
-        for k_grip in range(-2, 3):
-            yaw = obj_yaw + goal_obj[3] + k_grip * math.pi
+        for k_grip in range(-2, 3) if flip else range(-1, 2):
+            yaw = obj_yaw + goal_obj[3] + k_grip * (math.pi if flip else TWO_PI)
             dist = abs(yaw - near_yaw)
             if best is None or dist < best[0] - 1e-9:
                 best = (dist, yaw, obj_yaw)
@@ -149,12 +210,33 @@ def cluster_to_dict(cluster: Cluster) -> dict[str, Any]:
     return {f.name: _to_json(getattr(cluster, f.name)) for f in dataclasses.fields(cluster)}
 
 
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
 def cluster_from_dict(data: dict[str, Any]) -> Cluster:
-    """Inverse of :func:`cluster_to_dict`; arrays come back as float arrays."""
+    """Inverse of :func:`cluster_to_dict`; arrays come back as float arrays.
+
+    TreeError for a value that is not a number (array fields: a list of numbers;
+    ``np.asarray`` would turn the string ``"inf"`` into a float) and for a centroid or
+    extents not of length 3.
+    """
+    from smccli.errors import TreeError
+
     kwargs: dict[str, Any] = {}
     for f in dataclasses.fields(Cluster):
         v = data[f.name]
-        kwargs[f.name] = np.asarray(v, dtype=float) if isinstance(v, list) else v
+        if f.type == "np.ndarray":  # annotations are strings (``from __future__``)
+            if not (isinstance(v, list) and all(_is_number(x) for x in v)):
+                raise TreeError(f"cluster {f.name}: expected a list of numbers")
+            kwargs[f.name] = np.asarray(v, dtype=float)
+        elif _is_number(v):
+            kwargs[f.name] = v
+        else:
+            raise TreeError(f"cluster {f.name}: expected a number")
+    for name, shape in (("centroid", (3,)), ("extents", (3,))):
+        if np.shape(kwargs[name]) != shape:
+            raise TreeError(f"cluster {name}: expected 3 numbers, found {kwargs[name]!r:.60}")
     return Cluster(**kwargs)
 
 
@@ -173,6 +255,9 @@ def smc_to_dict(smc: Smc) -> tuple[dict[str, Any], dict[str, Any]]:
         "gripper_start": a.gripper_start,
         "gripper_end": a.gripper_end,
         "gripper_phase": a.gripper_phase,
+        "symmetry": a.symmetry,
+        "held_symmetry": a.held_symmetry,
+        "approach": _to_json(a.approach),
         "dmp": dmp_mod.to_dict(a.dmp),
     }
     return perception, action
@@ -193,5 +278,8 @@ def smc_from_dict(perception: dict[str, Any], action: dict[str, Any]) -> Smc:
             gripper_start=float(action["gripper_start"]),
             gripper_end=float(action["gripper_end"]),
             gripper_phase=float(action.get("gripper_phase", 1.0)),
+            symmetry=float(action["symmetry"]),
+            held_symmetry=float(action["held_symmetry"]),
+            approach=np.asarray(action["approach"], dtype=float).reshape(-1, 3),
         ),
     )

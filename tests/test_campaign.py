@@ -93,8 +93,12 @@ def test_report_keys_and_min_success_gate(trees, tmp_path):
         "timeout",
     }
     assert sum(b["trials"] for b in doc["by_band"]) == 2
-    gated = subprocess.run(
-        [*args, "--min-success", "1.01"], capture_output=True, text=True, env=env, timeout=300
+    gated = subprocess.run(  # the report exists now: --force to replace it
+        [*args, "--min-success", "1.01", "--force"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
     )
     assert gated.returncode == 1 and "below --min-success" in gated.stderr
     assert "Traceback" not in gated.stderr

@@ -170,7 +170,7 @@ def test_same_decisions_without_the_ground_truth_topic(bench, tmp_path):
     assert decisions_of(a) == decisions_of(b)
 
 
-def test_frontier_keeps_branches_that_differ_only_by_path_shape(bench):
+def test_frontier_keeps_branches_that_differ_only_by_their_path(bench):
     import dataclasses
 
     from smccli.tree import insert_chain
@@ -178,14 +178,16 @@ def test_frontier_keeps_branches_that_differ_only_by_path_shape(bench):
     _, tree_path = bench
     tree, scene = rp.resolve(tree_path, None)
     edges = tree.edges
-    # The same demonstration with another path shape (forcing weights x 4): Algorithm 1
-    # hangs it as a second branch from the root.
+    # The same demonstration with another path (forcing weights x 4) that comes to the goal
+    # from the side instead of from above (approach's x and z swapped): another way of
+    # doing it, so Algorithm 1 hangs it as a second branch from the root.
     chain = [
         dataclasses.replace(
             e.smc,
             action=dataclasses.replace(
                 e.smc.action,
                 dmp=dataclasses.replace(e.smc.action.dmp, weights=4 * e.smc.action.dmp.weights),
+                approach=e.smc.action.approach[:, [2, 1, 0]],
             ),
         )
         for e in edges

@@ -17,7 +17,7 @@ from smccli.perception.clusters import (
 from smccli.perception.distance import d_cluster, d_extents, d_scalar
 from smccli.perception.histogram import d_histogram, hsv_histogram
 from smccli.perception.params import PerceptionParams
-from smccli.perception.saliency import DEFAULT_EPSILON, salient_cluster
+from smccli.perception.saliency import DEFAULT_EPSILON, salient_cluster, scale_reading
 
 __all__ = [
     "DEFAULT_EPSILON",
@@ -33,4 +33,5 @@ __all__ = [
     "d_scalar",
     "hsv_histogram",
     "salient_cluster",
+    "scale_reading",
 ]

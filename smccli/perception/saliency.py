@@ -1,4 +1,5 @@
-"""Which cluster is salient for a fragment (rules (d)-(e), eq. 21-25)."""
+"""Which cluster is salient for a fragment (rules (d)-(e), eq. 21-25), and the scale's
+reading at a decision point (SI, always salient)."""
 
 from __future__ import annotations
 
@@ -31,3 +32,17 @@ def salient_cluster(
     d = np.array([np.hypot(*(c.centroid[:2] - poi)) for c in clusters])
     k = int(np.argmin(d))
     return k if d[k] < epsilon else None
+
+
+def scale_reading(t: np.ndarray, kg: np.ndarray, t_decision: float, window: float) -> float:
+    """The scale at a decision point [kg]: the median of the readings ``kg`` (W,) at times
+    ``t`` (W,) [s] in the ``window`` [s] that ends at ``t_decision`` (the nearest reading
+    when none falls inside). Compile and replay both read it so, at the same instant: where
+    the previous action has settled, before the next one starts."""
+    t, kg = np.asarray(t, dtype=float), np.asarray(kg, dtype=float)
+    if len(t) == 0:
+        raise ValueError("scale_reading: no readings")
+    inside = (t >= t_decision - window - 1e-9) & (t <= t_decision + 1e-9)
+    if not inside.any():
+        return float(kg[int(np.argmin(np.abs(t - t_decision)))])
+    return float(np.median(kg[inside]))
