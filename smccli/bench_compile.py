@@ -1,11 +1,13 @@
-"""Benchmark of ``smc compile``: time and peak memory at 1, 10 and 100 demonstrations, and
-perception separability (D_P of each object against itself and the others).
+"""Benchmark of ``smc compile``: time and peak memory at 1, 10 and 100 demonstrations,
+perception separability (D_P of each object against itself and the others) and action
+separability (D_A of one action demonstrated from many layouts, and against other actions).
 
-    python -m smccli.bench_compile [--sizes 1 10 100] [--poses 100]
+    python -m smccli.bench_compile [--sizes 1 10 100] [--poses 100] [--other-layouts 20]
 
-Demonstrations are the bench_pick and weigh_sort sample scripts recorded with seeds
-0, 1, 2, ... (operator tremor, hesitation and speed variation differ each time), cached
-under ``out/bench/demos``. Each compile runs in a fresh process so its peak RSS is its own.
+Demonstrations are bench_pick's sample script recorded with seeds 0, 1, 2, ..., each from
+its own random layout (``--randomize``: the white box anywhere on its 0.25 m x 0.5 m at any
+yaw; operator tremor, hesitation and speed differ too), cached under ``out/bench/demos``.
+Each compile runs in a fresh process so its peak RSS is its own.
 Separability renders every movable object of the built-in scenes at ``--poses`` random
 poses (the scene's ranges, any yaw) with the real camera and perception; the object's
 cluster is identified by the layout (evaluation only). Results: ``docs/bench_compile.json``.
@@ -43,26 +45,125 @@ print(json.dumps({"seconds": dt, "peak_rss_mb": rss_mb,
 """
 
 
-def demos(n: int, scene: str = "bench_pick", script: str = "demo.yaml") -> list[Path]:
-    """``n`` recordings of a sample script with seeds 0..n-1 (cached)."""
+def demos(
+    n: int, scene: str = "bench_pick", script: str | Path = "demo.yaml", first_seed: int = 0
+) -> list[Path]:
+    """``n`` recordings of a script, each from its own random layout (``--randomize``) with
+    seeds ``first_seed``.. (cached). A relative ``script`` is a sample script of ``scene``."""
     from smccli.record import RecordConfig, record
 
     CACHE.mkdir(parents=True, exist_ok=True)
+    script = Path(script)
+    path_of = script if script.is_absolute() else ROOT / "sample_logs" / scene / script
     out = []
-    for seed in range(n):
-        path = CACHE / f"{scene}_{Path(script).stem}_s{seed}.mcap"
+    for seed in range(first_seed, first_seed + n):
+        path = CACHE / f"{scene}_{script.stem}_r{seed}.mcap"
         if not path.exists():
             record(
                 RecordConfig(
                     scene=scene,
-                    script=ROOT / "sample_logs" / scene / script,
+                    script=path_of,
                     seed=seed,
                     output=path,
+                    randomize=True,
                     reproducible=True,
                 )
             )
         out.append(path)
     return out
+
+
+# Actions of bench_pick that share a gripper event and a salient object with the sample
+# demonstration's but are other actions: another goal on the object, or another way of
+# coming to it. D_A must tell them from the demonstration's, whatever the layout.
+_GRASP = "  - gripper: close\n  - mark: grasp\n"
+_PLACE = "  - gripper: open\n  - mark: release\n"
+_LIFT = "  - move_to: {object: white_box, offset: [0, 0, 0.15]}\n"
+OTHER_ACTIONS: dict[str, tuple[int, str]] = {
+    "grasp 4 cm off centre": (
+        0,
+        "  - move_to: {object: white_box, offset: [0.04, 0, 0.12]}\n"
+        "  - move_to: {object: white_box, offset: [0.04, 0, 0.0]}\n" + _GRASP,
+    ),
+    "grasp coming from the side": (
+        0,
+        "  - move_to: {object: white_box, offset: [0, 0.12, 0.03]}\n"
+        "  - move_to: {object: white_box, offset: [0, 0, 0.0]}\n" + _GRASP,
+    ),
+    "place in a corner": (
+        1,
+        "  - move_to: {object: white_box, offset: [0, 0, 0.0]}\n"
+        + _GRASP
+        + _LIFT
+        + "  - move_to: {object: orange_box, offset: [0.07, 0.03, 0.17]}\n"
+        "  - move_to: {object: orange_box, offset: [0.07, 0.03, 0.04]}\n" + _PLACE,
+    ),
+    "place coming from the side": (
+        1,
+        "  - move_to: {object: white_box, offset: [0, 0, 0.0]}\n"
+        + _GRASP
+        + _LIFT
+        + "  - move_to: {object: orange_box, offset: [-0.2, 0, 0.06]}\n"
+        "  - move_to: {object: orange_box, offset: [0, 0, 0.04]}\n" + _PLACE,
+    ),
+}
+"""Name -> (index of the demonstration's fragment it is compared with, teleop steps)."""
+
+
+def _chains(logs: list[Path]) -> list:
+    from smccli.compile import READ_TOPICS, extract_chain
+    from smccli.logs import read_log
+    from smccli.params import SmcParams
+    from smccli.segmentation import SegmentMode
+
+    return [
+        extract_chain(read_log(p, topics=READ_TOPICS), SmcParams(), SegmentMode.markers)
+        for p in logs
+    ]
+
+
+def action_separability(n_layouts: int, n_other: int) -> dict:
+    """D_A between the same action demonstrated from ``n_layouts`` random layouts, and
+    between it and other actions (``OTHER_ACTIONS``, ``n_other`` layouts each) [m]."""
+    from smccli.contingency import d_a
+    from smccli.params import SmcParams
+
+    params = SmcParams()
+    same_chains = _chains(demos(n_layouts))
+    header = (ROOT / "sample_logs" / "bench_pick" / "demo.yaml").read_text().split("steps:")[0]
+    out: dict[str, dict] = {}
+    for k, name in enumerate(("grasp", "place")):
+        acts = [c.smcs[k].action for c in same_chains]
+        d = [d_a(a, b, params) for a, b in itertools.combinations(acts, 2)]
+        out[name] = {"layouts": len(acts), "same_p99": float(np.percentile(d, 99))}
+        out[name]["same_max"] = float(np.max(d))
+    scripts = CACHE / "scripts"
+    scripts.mkdir(parents=True, exist_ok=True)
+    for i, (other, (k, steps)) in enumerate(OTHER_ACTIONS.items()):
+        script = scripts / f"other{i}.yaml"
+        text = header + "steps:\n" + steps
+        if not script.exists() or script.read_text() != text:
+            script.write_text(text)
+        chains = _chains(demos(n_other, script=script, first_seed=1000))
+        mine = [c.smcs[k].action for c in chains]
+        base = [c.smcs[k].action for c in same_chains[:n_other]]
+        d = [d_a(a, b, params) for a in mine for b in base]
+        out[other] = {
+            "compared_with": ("grasp", "place")[k],
+            "layouts": len(mine),
+            "different_p1": float(np.percentile(d, 1)),
+            "different_min": float(np.min(d)),
+        }
+    same_p99 = max(out[n]["same_p99"] for n in ("grasp", "place"))
+    diff_p1 = min(v["different_p1"] for n, v in out.items() if n not in ("grasp", "place"))
+    summary = {"t_ha": params.t_ha, "same_p99": same_p99, "different_p1": diff_p1, "by_action": out}
+    print(
+        f"action separability ({n_layouts} layouts, {n_other} per other action): same action "
+        f"p99 {same_p99:.4f} m, other actions p1 {diff_p1:.4f} m; T_hA = {params.t_ha} m"
+    )
+    for name, v in out.items():
+        print(f"  {name:28s} {json.dumps({k: v[k] for k in v if k != 'compared_with'})}")
+    return summary
 
 
 def compile_scaling(sizes: list[int]) -> list[dict]:
@@ -154,6 +255,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--sizes", type=int, nargs="+", default=[1, 10, 100])
     ap.add_argument("--poses", type=int, default=100)
+    ap.add_argument("--other-layouts", type=int, default=20)
     args = ap.parse_args()
     t0 = time.perf_counter()
     doc: dict[str, object] = {
@@ -161,6 +263,7 @@ def main() -> None:
         "machine": machine(),
         "compile": compile_scaling(args.sizes),
         "separability": separability(args.poses),
+        "action_separability": action_separability(max(args.sizes), args.other_layouts),
     }
     doc["wall_s"] = round(time.perf_counter() - t0, 1)
     write_atomic(ROOT / "docs" / "bench_compile.json", json.dumps(doc, indent=1) + "\n")

@@ -25,7 +25,7 @@ from smccli.errors import SceneError
 from smccli.schemas import KeyPath, check_yaml, parse_yaml, validate_yaml
 
 SCENES_DIR = Path(__file__).parent / "scenes"
-SHAPES = ("box", "cylinder", "pyramid", "open_box", "scale")
+SHAPES = ("box", "cylinder", "pyramid", "open_box", "scale", "mug")
 RELATIONS = ("on_top_of", "inside")
 PYRAMID_STEPS = 3
 """A pyramid is approximated by this many stacked boxes (no meshes offline)."""
@@ -43,7 +43,8 @@ class ObjectSpec:
     shape: str
     """One of :data:`SHAPES`."""
     size: tuple[float, float, float]
-    """Full extents of the bounding box along x, y, z [m] (cylinder: x = y = diameter)."""
+    """Full extents of the bounding box along x, y, z [m] (cylinder: x = y = diameter; mug:
+    x = body diameter + handle reach, y = body diameter)."""
     rgba: tuple[float, float, float, float]
     """Colour, each in [0, 1]."""
     mass: float
@@ -342,6 +343,12 @@ def _parse(
                 )
             ranges[axis] = (lo, hi)
         sx, sy, sz = _vec(o["size"])
+        if shape == "mug" and sx <= sy:
+            raise SceneError(
+                f"{_at(yaml_text, where, ('objects', i, 'size'))}: a mug's size x (body diameter "
+                f"+ handle reach) must exceed its size y (body diameter), found x {sx:g} <= "
+                f"y {sy:g}"
+            )
         r, g, b, a = _vec(o.get("rgba", (0.5, 0.5, 0.5, 1.0)))
         objects.append(
             ObjectSpec(
@@ -464,6 +471,39 @@ def _yaw_quat(yaw: float) -> list[float]:
     return [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
 
 
+MUG_HANDLE_SPAN = 0.3
+"""A mug's handle spans z = ±this × height about the centre: its top is 20 % of the height
+below the rim, so the top layer perception sees is the rim alone."""
+MUG_HANDLE_BAR = 0.01
+"""Thickness of the handle's bars [m] (at most a third of the handle's reach)."""
+MUG_HANDLE_WIDTH = 0.012
+"""Width of the handle across the mug [m] (at most the body's radius)."""
+
+
+def _mug_parts(sx: float, sy: float, sz: float) -> list[tuple[Any, list[float], list[float]]]:
+    """A mug's primitives ``(type, half size, pos)`` from its half extents [m].
+
+    A solid cylinder (diameter ``2 sy``) at the -x end of the bounding box, and on its +x
+    side a handle reaching ``2 (sx - sy)`` out of it: a loop of three boxes (upper arm,
+    outer bar, lower arm) whose top is below the rim.
+    """
+    box, cyl = mujoco.mjtGeom.mjGEOM_BOX, mujoco.mjtGeom.mjGEOM_CYLINDER
+    r, reach = sy, 2 * (sx - sy)
+    t = min(MUG_HANDLE_BAR, reach / 3)
+    w = min(MUG_HANDLE_WIDTH, r) / 2
+    # The arms start where their corners meet the curved wall, so they neither leave a gap
+    # nor bury much volume (the mass is shared by volume) inside the body.
+    x0 = sx - reach - (r - math.sqrt(r * r - w * w))
+    top = MUG_HANDLE_SPAN * 2 * sz
+    arm = (sx - x0) / 2
+    return [
+        (cyl, [r, sz, 0], [-reach / 2, 0, 0]),
+        (box, [arm, w, t / 2], [x0 + arm, 0, top - t / 2]),
+        (box, [t / 2, w, top - t], [sx - t / 2, 0, 0]),
+        (box, [arm, w, t / 2], [x0 + arm, 0, -top + t / 2]),
+    ]
+
+
 def _add_object(spec: mujoco.MjSpec, obj: ObjectSpec) -> None:
     """Add ``obj`` as a body of primitives; free unless ``obj.fixed``."""
     x, y, z, yaw = obj.pose
@@ -490,6 +530,8 @@ def _add_object(spec: mujoco.MjSpec, obj: ObjectSpec) -> None:
         for k in range(PYRAMID_STEPS):
             f = 1.0 - k / PYRAMID_STEPS
             parts.append((box, [sx * f, sy * f, h / 2], [0, 0, -sz + h * (k + 0.5)]))
+    elif obj.shape == "mug":
+        parts = _mug_parts(sx, sy, sz)
     elif obj.shape == "open_box":
         w = obj.wall / 2
         parts = [

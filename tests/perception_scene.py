@@ -22,6 +22,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering unless told othe
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from smccli.scene import ObjectSpec as SceneObject  # noqa: E402
+from smccli.scene import _add_object  # noqa: E402
 from smccli.sensors import CameraFrame, RobotGeometry  # noqa: E402
 
 TABLE_TOP = 0.75
@@ -79,6 +81,37 @@ OBJECTS: tuple[ObjectSpec, ...] = (
     ObjectSpec("blue_box", "box", (0.10, 0.05, 0.04), (0.1, 0.25, 0.85, 1.0)),
     ObjectSpec("blue_box_small", "box", (0.06, 0.04, 0.03), (0.1, 0.25, 0.85, 1.0)),
 )
+
+
+def _built(name: str, shape: str, size: tuple[float, float, float], rgba: tuple) -> SceneObject:
+    return SceneObject(
+        name=name,
+        shape=shape,
+        size=size,
+        rgba=rgba,
+        mass=0.1,
+        pose=(*PARK, 0.0),
+        range_x=(PARK[0], PARK[0]),
+        range_y=(PARK[1], PARK[1]),
+        range_yaw=(0.0, 0.0),
+    )
+
+
+MUG = _built("white_mug", "mug", (0.09, 0.06, 0.08), WHITE)
+"""A white mug (body 6 cm across, 8 cm tall, handle reaching 3 cm out on its +x side): the
+body is the white cylinder's, so only the handle tells them apart."""
+BUILT: tuple[SceneObject, ...] = (
+    MUG,
+    _built("grey_step_pyramid", "pyramid", (0.06, 0.06, 0.06), GREY),
+    _built("white_long_box", "box", (0.14, 0.04, 0.05), WHITE),
+    _built("orange_open_box", "open_box", (0.26, 0.16, 0.07), (1.0, 0.45, 0.05, 1.0)),
+    _built("grey_bin", "open_box", (0.18, 0.18, 0.08), GREY),
+    _built("scale", "scale", (0.14, 0.14, 0.04), (0.7, 0.7, 0.72, 1.0)),
+)
+"""Objects built by :mod:`smccli.scene` itself (``_add_object``, the geometry of the
+built-in scenes): the mug, the stepped pyramid, the bins, the scale. They have free joints
+and are placed through ``qpos``; they are not part of :data:`OBJECTS`, so the separability
+figures keep their meaning."""
 
 
 def _camera_xyaxes() -> str:
@@ -142,13 +175,17 @@ class PerceptionScene:
     """The test scene with a renderer: place objects, render a :class:`CameraFrame`."""
 
     def __init__(self) -> None:
-        self.model = mujoco.MjModel.from_xml_string(scene_xml())
+        spec = mujoco.MjSpec.from_string(scene_xml())
+        for obj in BUILT:
+            _add_object(spec, obj)
+        self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
         self.renderer = mujoco.Renderer(self.model, height=HEIGHT, width=WIDTH)
         self.renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = False
         self.camera = self.model.camera("rgbd").id
         self._mocap = {s.name: self.model.body(s.name).mocapid[0] for s in OBJECTS}
         self._mocap["arm"] = self.model.body("arm").mocapid[0]
+        self._qpos = {o.name: self.model.joint(f"{o.name}_joint").qposadr[0] for o in BUILT}
         self.arm_in_view = False
         self.clear()
 
@@ -160,14 +197,21 @@ class PerceptionScene:
         for i, name in enumerate(self._mocap):
             self.data.mocap_pos[self._mocap[name]] = PARK + [0.0, 0.3 * i, 0.0]
             self.data.mocap_quat[self._mocap[name]] = [1, 0, 0, 0]
+        for i, name in enumerate(self._qpos):
+            a = self._qpos[name]
+            self.data.qpos[a : a + 7] = [*(PARK + [0.5, 0.3 * i, 0.0]), 1, 0, 0, 0]
         self.arm_in_view = False
 
     def place(self, name: str, x: float, y: float, yaw: float) -> np.ndarray:
         """Put an object upright on the table; returns its true box centre, shape (3,) [m]."""
-        spec = spec_by_name(name)
-        center = np.array([x, y, TABLE_TOP + spec.size[2] / 2])
-        self.data.mocap_pos[self._mocap[name]] = center
-        self.data.mocap_quat[self._mocap[name]] = [np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)]
+        center = np.array([x, y, TABLE_TOP + size_of(name)[2] / 2])
+        quat = [np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)]
+        if name in self._qpos:
+            a = self._qpos[name]
+            self.data.qpos[a : a + 7] = [*center, *quat]
+        else:
+            self.data.mocap_pos[self._mocap[name]] = center
+            self.data.mocap_quat[self._mocap[name]] = quat
         return center
 
     def show_arm(self, top: np.ndarray = ARM_TOP) -> None:
@@ -213,6 +257,14 @@ def spec_by_name(name: str) -> ObjectSpec:
         if spec.name == name:
             return spec
     raise KeyError(f"unknown test object {name!r}; valid: {[s.name for s in OBJECTS]}")
+
+
+def size_of(name: str) -> tuple[float, float, float]:
+    """Full extents of a test object, :data:`OBJECTS` or :data:`BUILT` [m]."""
+    for obj in BUILT:
+        if obj.name == name:
+            return obj.size
+    return spec_by_name(name).size
 
 
 def random_pose(rng: np.random.Generator) -> tuple[float, float, float]:
@@ -287,6 +339,137 @@ def separability(n_poses: int = 100, seed: int = 0) -> dict:
     }
 
 
+def handle_hidden(x: float, y: float, yaw: float, cone: float = np.pi / 6) -> bool:
+    """Whether a mug at ``(x, y, yaw)`` has its handle pointing within ``cone`` [rad] of
+    straight away from the camera (ground truth, for tests: then the body may hide it)."""
+    away = np.arctan2(y - CAMERA_POS[1], x - CAMERA_POS[0])
+    return abs((yaw - away + np.pi) % (2 * np.pi) - np.pi) < cone
+
+
+def symmetry(n_poses: int = 100, seed: int = 0, n_clutter: int = 50) -> dict:
+    """How often objects are seen as having no symmetry (``yaw_period`` 2 pi).
+
+    Renders each object of :data:`OBJECTS` and :data:`BUILT` alone at ``n_poses`` random
+    poses: the mug should be asymmetric with its yaw at the handle, the others never. Then
+    ``n_clutter`` frames of six random small objects (the mug among them) with the arm in
+    view. Also d_cluster within the mug's views (handle seen or not) and against the white
+    cylinder (the mug's body without a handle).
+    """
+    from smccli.perception import PerceptionParams, clusters_from_frame, d_cluster
+
+    params = PerceptionParams(**CROP)
+    rng = np.random.default_rng(seed)
+    scene = PerceptionScene()
+    names = [s.name for s in OBJECTS] + [o.name for o in BUILT]
+    asymmetric = {n: 0 for n in names}
+    miscounted = {n: 0 for n in names}
+    yaw_err, mug_views, mug_asym, cylinders, centre_err = [], [], [], [], []
+    hidden = {"poses": 0, "asymmetric": 0}
+    try:
+        for name in names:
+            for _ in range(n_poses):
+                scene.clear()
+                x, y, yaw = random_pose(rng)
+                center = scene.place(name, x, y, yaw)
+                found = clusters_from_frame(scene.render(), None, params)
+                if len(found) != 1:
+                    miscounted[name] += 1
+                    continue
+                (c,) = found
+                asym = c.yaw_period > 2 * np.pi - 1e-6
+                asymmetric[name] += asym
+                if name == "white_cylinder":
+                    cylinders.append(c)
+                if name != MUG.name:
+                    continue
+                mug_views.append(c)
+                mug_asym.append(asym)
+                if handle_hidden(x, y, yaw):
+                    hidden["poses"] += 1
+                    hidden["asymmetric"] += asym
+                err = (c.yaw - yaw + np.pi) % (2 * np.pi) - np.pi
+                yaw_err.append(np.degrees(abs(err)) if asym else np.inf)
+                if asym:
+                    centre_err.append(float(np.linalg.norm(c.centroid - center)))
+        clutter_names = [s.name for s in OBJECTS] + [MUG.name, "grey_step_pyramid"]
+        # Each layout without the arm (every object must be found once) and with it (it
+        # hides objects and parts of their tops: none may look asymmetric but the mug).
+        clutter = {"frames": n_clutter, "with_mug": 0, "miscounted_without_arm": 0}
+        for arm in ("without_arm", "with_arm"):
+            clutter |= {f"mug_asymmetric_{arm}": 0, f"other_asymmetric_{arm}": 0}
+        for _ in range(n_clutter):
+            scene.clear()
+            picks = list(rng.choice(clutter_names, size=6, replace=False))
+            truth = {n: scene.place(n, *p) for n, p in random_layout(rng, picks, 0.16).items()}
+            clutter["with_mug"] += MUG.name in picks
+            for arm in ("without_arm", "with_arm"):
+                if arm == "with_arm":
+                    scene.show_arm()
+                found = clusters_from_frame(scene.render(), scene.robot_geometry(), params)
+                if arm == "without_arm":
+                    clutter["miscounted_without_arm"] += len(found) != len(picks)
+                for c in found:
+                    near = min(truth, key=lambda n: np.hypot(*(truth[n][:2] - c.centroid[:2])))
+                    if c.yaw_period > 2 * np.pi - 1e-6:
+                        who = "mug" if near == MUG.name else "other"
+                        clutter[f"{who}_asymmetric_{arm}"] += 1
+    finally:
+        scene.close()
+    err = np.array(yaw_err)
+    seen = err[np.isfinite(err)]
+    flags = np.array(mug_asym, dtype=bool)
+    seen_extents = [c.extents for c, f in zip(mug_views, flags, strict=True) if f]
+    mixed = [
+        d_cluster(a, b, params)
+        for i, a in enumerate(mug_views)
+        for j, b in enumerate(mug_views)
+        if flags[i] and not flags[j]
+    ]
+    same_kind = [
+        d_cluster(mug_views[i], mug_views[j], params)
+        for i, j in itertools.combinations(np.flatnonzero(flags), 2)
+    ]
+    vs_cyl = [
+        d_cluster(m, c, params)
+        for m, f in zip(mug_views, flags, strict=True)
+        for c in cylinders
+        if f
+    ]
+    round_vs_cyl = [
+        d_cluster(m, c, params)
+        for m, f in zip(mug_views, flags, strict=True)
+        for c in cylinders
+        if not f
+    ]
+
+    def stats(v: list[float]) -> dict:
+        return {"n": len(v), "min": min(v), "max": max(v)} if v else {"n": 0}
+
+    return {
+        "n_poses": n_poses,
+        "seed": seed,
+        "asymmetric": asymmetric,
+        "miscounted": miscounted,
+        "mug_asymmetric_yaw_within_10deg": int((err < 10).sum()),
+        "mug_yaw_err_deg": {"median": float(np.median(seen)), "max": float(seen.max())}
+        if len(seen)
+        else {},
+        "mug_handle_within_30deg_of_away": hidden,
+        "mug_centre_err_cm_max": 100 * max(centre_err, default=np.nan),
+        "mug_asymmetric_extents_cm": {
+            "min": (100 * np.min(seen_extents, axis=0)).round(1).tolist(),
+            "max": (100 * np.max(seen_extents, axis=0)).round(1).tolist(),
+        }
+        if len(seen_extents)
+        else {},
+        "clutter": clutter,
+        "d_mug_views_both_asymmetric": stats(same_kind),
+        "d_mug_asymmetric_vs_round_view": stats(mixed),
+        "d_mug_asymmetric_vs_white_cylinder": stats(vs_cyl),
+        "d_mug_round_view_vs_white_cylinder": stats(round_vs_cyl),
+    }
+
+
 def timing(n_frames: int = 50, seed: int = 0) -> dict:
     """Time ``clusters_from_frame`` on cluttered frames: six objects and the arm in view.
 
@@ -330,6 +513,12 @@ if __name__ == "__main__":
     # MUJOCO_GL=egl .venv/bin/python tests/perception_scene.py [n_poses] [seed]
     import sys
 
+    if sys.argv[1:2] == ["symmetry"]:
+        # MUJOCO_GL=egl .venv/bin/python -m tests.perception_scene symmetry [n_poses] [seed]
+        n = int(sys.argv[2]) if len(sys.argv) > 2 else 100
+        seed = int(sys.argv[3]) if len(sys.argv) > 3 else 0
+        print(json.dumps(symmetry(n, seed), indent=1))
+        sys.exit()
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 100
     seed = int(sys.argv[2]) if len(sys.argv) > 2 else 0
     print(json.dumps({"timing": timing(50, seed), "separability": separability(n, seed)}, indent=1))

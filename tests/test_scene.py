@@ -223,7 +223,7 @@ BROKEN_SCENES = {
         "shape: sphere",
         "objects[1].shape",
         "shape: sphere",
-        "unknown value 'sphere' (valid: box, cylinder, pyramid, open_box, scale)",
+        "unknown value 'sphere' (valid: box, cylinder, pyramid, open_box, scale, mug)",
     ),
 }
 

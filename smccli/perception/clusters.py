@@ -23,13 +23,16 @@ class Cluster:
     footprint rectangle's centre in x-y, halfway between the table and the top in z (the
     mean of the visible points would lean towards the camera)."""
     yaw: float
-    """Yaw of the footprint's longest horizontal axis about world z, in (-pi/2, pi/2]
-    [rad]; 0 for a round footprint. Meaningful modulo ``yaw_period``."""
+    """Yaw about world z [rad], meaningful modulo ``yaw_period``: the footprint's longest
+    horizontal axis in (-pi/2, pi/2] (elongated), a side's direction in [-pi/4, pi/4)
+    (square), 0 (round), or the direction from the top's centre to the protrusion (e.g. a
+    mug's handle) in (-pi, pi] (no symmetry)."""
     yaw_period: float
-    """Symmetry of the footprint [rad]: pi elongated, pi/2 square, 0 round (yaw undefined)."""
+    """Symmetry of the footprint [rad]: pi elongated, pi/2 square, 0 round (yaw undefined),
+    2 pi none (a protrusion on one side, e.g. a mug's handle)."""
     extents: np.ndarray
-    """(length, width, height), shape (3,) [m]: footprint sides (length >= width) and the
-    top's height above the table plane."""
+    """(length, width, height), shape (3,) [m]: footprint sides (length >= width), the
+    protrusion included, and the top's height above the table plane."""
     histogram: np.ndarray
     """Colour histogram, shape (hue_bins * sat_bins + val_bins,), sums to 1
     (see :mod:`smccli.perception.histogram`)."""
@@ -49,10 +52,58 @@ def _wrap_half_pi(a: float) -> float:
     return np.pi / 2 if a <= -np.pi / 2 + 1e-12 else float(a)
 
 
+def _wrap_pi(a: float) -> float:
+    """Wrap a direction into (-pi, pi]."""
+    a = float(np.arctan2(np.sin(a), np.cos(a)))
+    return np.pi if a <= -np.pi + 1e-12 else a
+
+
+def outside_hull(xy: np.ndarray, hull: np.ndarray) -> np.ndarray:
+    """How far points (n, 2) lie outside a convex polygon ``hull`` (k, 2), shape (n,) [m].
+
+    The largest signed distance to the polygon's edge lines: exact off an edge, a lower
+    bound off a corner, negative inside. Vectorised over edges (a per-point
+    ``cv2.pointPolygonTest`` loop is ~100 times slower).
+    """
+    edges = np.roll(hull, -1, axis=0) - hull
+    normals = np.stack([edges[:, 1], -edges[:, 0]], axis=1)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    # Orient the normals outwards whatever the winding: the hull's mean is inside.
+    inner = np.einsum("kj,kj->k", normals, hull.mean(axis=0) - hull)
+    normals[inner > 0] *= -1
+    return np.max(np.einsum("kj,nkj->nk", normals, xy[:, None, :] - hull[None]), axis=1)
+
+
+def _outside_top(xy: np.ndarray, top: np.ndarray) -> np.ndarray:
+    """How far each point (n, 2) lies outside the top layer's (m, 2) convex hull, shape (n,)
+    [m]; zeros when the top is a point or a line."""
+    hull = cv2.convexHull(top.astype(np.float32))[:, 0, :].astype(np.float64)
+    if len(hull) < 3 or cv2.contourArea(hull.astype(np.float32)) <= 0:
+        return np.zeros(len(xy))
+    return outside_hull(xy, hull)
+
+
+def _spread(d: np.ndarray) -> float:
+    """Circular standard deviation of the directions of vectors (n, 2) [rad]; inf if n = 0."""
+    if len(d) == 0:
+        return float("inf")
+    u = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+    r = float(np.linalg.norm(u.mean(axis=0)))  # mean resultant length
+    return float(np.sqrt(-2.0 * np.log(max(r, 1e-12))))
+
+
 def describe_cluster(
-    points: np.ndarray, colors: np.ndarray, plane: np.ndarray | None, params: PerceptionParams
+    points: np.ndarray,
+    colors: np.ndarray,
+    plane: np.ndarray | None,
+    params: PerceptionParams,
+    cut: np.ndarray | None = None,
 ) -> Cluster:
-    """Location, extents, symmetry and histogram of one cluster's points (n, 3) [m]."""
+    """Location, extents, symmetry and histogram of one cluster's points (n, 3) [m].
+
+    ``cut`` (n,) bool marks points whose pixel borders something hiding part of the object
+    (:func:`cut_points`); None = nothing is hidden.
+    """
     # Height above the table: signed distance to the table plane.
     if plane is not None:
         heights = plane_distance(points, plane)
@@ -65,9 +116,28 @@ def describe_cluster(
     # seen whole and lies over the footprint's centre: take the centre of the top layer,
     # and complete the footprint by point symmetry about it (exact for boxes, cylinders,
     # pyramids and cones, the objects of the built-in scenes).
-    top = xy[heights > height - params.top_band]
+    in_top = heights > height - params.top_band
+    top = xy[in_top]
     (cx, cy), _, _ = cv2.minAreaRect(top.astype(np.float32))
     center = np.array([cx, cy])
+    # A protrusion: points further than a margin outside the top's hull (the walls of
+    # boxes and cylinders are within a pixel of it), enough of them, not most of the
+    # cluster (a pyramid's top is its apex: nearly everything is outside), all on one side.
+    # Such an object (a mug) has no symmetry and its protrusion is not mirrored.
+    # Only with the top seen whole: if the arm hides part of it, the sides stick out.
+    whole = cut is None or not bool(np.any(cut[in_top]))
+    dist = _outside_top(xy, top) if whole else np.zeros(len(xy))
+    far = dist > params.protrusion_margin
+    n_far = int(far.sum())
+    if (
+        params.protrusion_min_points <= n_far <= params.protrusion_max_share * len(xy)
+        and _spread(xy[far] - center) <= params.protrusion_max_spread
+    ):
+        return _describe_asymmetric(points, colors, plane, xy, center, far, dist, height, params)
+    if n_far < params.protrusion_min_points:
+        # A glimpse of a handle mostly hidden behind its body: mirroring it would invent a
+        # second handle and an elongated footprint. Left out, the mug is seen as round.
+        xy = xy[~far]
     xy = np.vstack([xy, 2.0 * center - xy]).astype(np.float32)
     rect = cv2.minAreaRect(xy)
     corners = cv2.boxPoints(rect).astype(np.float64)
@@ -104,6 +174,54 @@ def describe_cluster(
     )
 
 
+def _describe_asymmetric(
+    points: np.ndarray,
+    colors: np.ndarray,
+    plane: np.ndarray | None,
+    xy: np.ndarray,
+    center: np.ndarray,
+    prot: np.ndarray,
+    dist: np.ndarray,
+    height: float,
+    params: PerceptionParams,
+) -> Cluster:
+    """A cluster with a protrusion ``prot`` (mask (n,)) on one side of its top's ``center``;
+    ``dist`` (n,) [m] is each point's distance outside the top's convex hull.
+
+    Yaw points from the top's centre to the protrusion; the footprint is the body's points
+    completed by point symmetry plus the rest, boxed along the yaw.
+    """
+    d = xy[prot] - center
+    yaw = float(np.arctan2(d[:, 1].mean(), d[:, 0].mean()))
+    # The camera sees the protrusion's near side face as well as its top, which pulls the
+    # mean sideways; the middle of its lateral extent does not lean (its top is seen whole).
+    c, s = np.cos(yaw), np.sin(yaw)
+    along, across = d[:, 0] * c + d[:, 1] * s, d[:, 1] * c - d[:, 0] * s
+    yaw = _wrap_pi(yaw + np.arctan2(0.5 * (across.max() + across.min()), along.mean()))
+    # The body is what lies over the top's hull (walls are within a pixel, 3-6 mm, of it);
+    # mirroring the handle's root, 5-10 mm out, would lengthen the far side.
+    near = dist <= 0.5 * params.protrusion_margin
+    body = xy[near]
+    foot = np.vstack([body, 2.0 * center - body, xy[~near]]) - center
+    c, s = np.cos(yaw), np.sin(yaw)
+    along, across = foot[:, 0] * c + foot[:, 1] * s, foot[:, 1] * c - foot[:, 0] * s
+    a0, a1, b0, b1 = along.min(), along.max(), across.min(), across.max()
+    mid = center + 0.5 * (a0 + a1) * np.array([c, s]) + 0.5 * (b0 + b1) * np.array([-s, c])
+    if plane is not None:
+        base_z = float(-(plane[0] * mid[0] + plane[1] * mid[1] + plane[3]) / plane[2])
+    else:
+        base_z = float(points[:, 2].min())
+    sides = sorted((float(a1 - a0), float(b1 - b0)), reverse=True)
+    return Cluster(
+        centroid=np.array([mid[0], mid[1], base_z + height / 2]),
+        yaw=yaw,
+        yaw_period=2.0 * np.pi,
+        extents=np.array([sides[0], sides[1], height]),
+        histogram=hsv_histogram(colors, params),
+        n_points=int(len(points)),
+    )
+
+
 def cluster_labels(points: np.ndarray, params: PerceptionParams) -> np.ndarray:
     """DBSCAN labels (open3d), shape (n,) int; -1 = noise. Deterministic for a given input."""
     if len(points) == 0:
@@ -115,24 +233,133 @@ def cluster_labels(points: np.ndarray, params: PerceptionParams) -> np.ndarray:
     )
 
 
+def _pixels(points: np.ndarray, frame: CameraFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Image column, row (n,) int and depth (n,) [m] of world points (n, 3): the pixels
+    they were lifted from."""
+    T = np.asarray(frame.T_world_camera, dtype=np.float64)
+    K = np.asarray(frame.K, dtype=np.float64)
+    p = np.einsum("ji,nj->ni", T[:3, :3], points - T[:3, 3])  # R^T (p - t), optical frame
+    z = p[:, 2]
+    y_n, x_n = p[:, 1] / z, p[:, 0] / z
+    u = np.rint(K[0, 0] * x_n + K[0, 1] * y_n + K[0, 2]).astype(np.int64)
+    v = np.rint(K[1, 1] * y_n + K[1, 2]).astype(np.int64)
+    return u, v, z
+
+
+def attach_hidden_parts(
+    points: np.ndarray, labels: np.ndarray, frame: CameraFrame, params: PerceptionParams
+) -> np.ndarray:
+    """Labels (n,) with each hidden part merged into the cluster that hides it.
+
+    A mug's handle behind its body is seen past the rim, but the body hides the stretch
+    that joins them (its occlusion shadow), so DBSCAN cuts the handle off as a cluster of
+    its own. Cluster ``a`` joins cluster ``b`` when at least ``attach_min_contacts`` of
+    its pixels touch (8-neighbourhood) pixels of ``b`` that are nearer the camera, with the
+    two points within ``attach_gap`` of each other, ``a``'s top is lower than ``b``'s and
+    ``a`` has at most ``attach_max_ratio`` times ``b``'s points.
+    Touching in the image means nothing visible lies between them (no table); an object
+    standing apart shows table in between.
+    """
+    n_labels = int(labels.max(initial=-1)) + 1
+    if n_labels < 2:
+        return labels
+    h, w = np.asarray(frame.depth).shape[:2]
+    u, v, z = _pixels(points, frame)
+    inside = (labels >= 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    index = np.full((h, w), -1, dtype=np.int64)
+    index[v[inside], u[inside]] = np.flatnonzero(inside)
+    idx = np.flatnonzero(inside)
+    pairs = []
+    for du, dv in ((1, 0), (0, 1), (1, 1), (1, -1)):  # each unordered neighbour pair once
+        uu, vv = u[idx] + du, v[idx] + dv
+        ok = (uu >= 0) & (uu < w) & (vv >= 0) & (vv < h)
+        i = idx[ok]
+        j = index[vv[ok], uu[ok]]
+        keep = j >= 0
+        i, j = i[keep], j[keep]
+        keep = labels[i] != labels[j]
+        pairs.append(np.stack([i[keep], j[keep]], axis=1))
+    ij = np.concatenate(pairs)
+    if len(ij) == 0:
+        return labels
+    # Order each pair as (farther, nearer) and keep those bridging a small gap.
+    far_first = z[ij[:, 0]] >= z[ij[:, 1]]
+    ij = np.where(far_first[:, None], ij, ij[:, ::-1])
+    gap = np.linalg.norm(points[ij[:, 0]] - points[ij[:, 1]], axis=1)
+    ij = ij[gap < params.attach_gap]
+    tops = np.full(n_labels, -np.inf)
+    np.maximum.at(tops, labels[labels >= 0], points[labels >= 0, 2])
+    sizes = np.bincount(labels[labels >= 0], minlength=n_labels)
+    contacts = np.zeros((n_labels, n_labels), dtype=np.int64)
+    np.add.at(contacts, (labels[ij[:, 0]], labels[ij[:, 1]]), 1)
+    parent = np.arange(n_labels)
+    for a in range(n_labels):
+        b = int(np.argmax(contacts[a]))
+        if (
+            contacts[a, b] >= params.attach_min_contacts
+            and tops[a] < tops[b]
+            and sizes[a] <= params.attach_max_ratio * sizes[b]
+        ):
+            parent[a] = b
+    # Follow chains (a part of a part); tops strictly increase along them, so they end.
+    for _ in range(n_labels):
+        parent = parent[parent]
+    out = labels.copy()
+    out[labels >= 0] = parent[labels[labels >= 0]]
+    return out
+
+
+def cut_points(
+    points: np.ndarray, labels: np.ndarray, frame: CameraFrame, params: PerceptionParams
+) -> np.ndarray:
+    """Points (n,) whose pixel borders (8-neighbourhood) a pixel outside their cluster that
+    is not ``silhouette_step`` farther from the camera, or the image's edge.
+
+    An object's outline in the image borders only what lies behind it (the table) or the
+    object itself; anything else nearer or level with it (an occluder, pixels removed by
+    the self-filter or the crop) hides part of it.
+    """
+    depth = np.asarray(frame.depth, dtype=np.float64)
+    h, w = depth.shape[:2]
+    u, v, z = _pixels(points, frame)
+    img = np.full((h, w), -2, dtype=np.int64)  # -2: no object point (table, robot, crop)
+    ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    img[v[ok], u[ok]] = labels[ok]
+    cut = ~ok
+    for du in (-1, 0, 1):
+        for dv in (-1, 0, 1):
+            if du == 0 and dv == 0:
+                continue
+            uu, vv = u + du, v + dv
+            inside = ok & (uu >= 0) & (uu < w) & (vv >= 0) & (vv < h)
+            cut |= ok & ~inside  # at the image's edge
+            i = np.flatnonzero(inside)
+            d = depth[vv[i], uu[i]]
+            behind = np.isfinite(d) & (d > z[i] + params.silhouette_step)
+            cut[i] |= (img[vv[i], uu[i]] != labels[i]) & ~behind
+    return cut
+
+
 def clusters_from_frame(
     frame: CameraFrame, robot: RobotGeometry | None, params: PerceptionParams | None = None
 ) -> tuple[Cluster, ...]:
     """The object clusters in one RGB-D frame (ML perception, eq. 14).
 
     depth -> world points -> crop -> self-filter (``robot``'s spheres) -> table plane
-    removal (RANSAC) -> DBSCAN -> per cluster: histogram, box centre, yaw, extents.
+    removal (RANSAC) -> DBSCAN -> hidden parts joined to the cluster hiding them -> per
+    cluster: histogram, box centre, yaw, symmetry, extents.
     Sorted by centroid x, then y. Uses only the images and the robot's own geometry.
     """
     params = params or PerceptionParams()
     points, colors, plane = object_points(frame, robot, params)
-    labels = cluster_labels(points, params)
+    labels = attach_hidden_parts(points, cluster_labels(points, params), frame, params)
+    cut = cut_points(points, labels, frame, params)
     found = []
     for k in range(int(labels.max(initial=-1)) + 1):
         idx = np.flatnonzero(labels == k)
         if len(idx) < params.min_cluster_points:
             continue
-        found.append(describe_cluster(points[idx], colors[idx], plane, params))
+        found.append(describe_cluster(points[idx], colors[idx], plane, params, cut[idx]))
     found.sort(key=lambda c: (float(c.centroid[0]), float(c.centroid[1])))
     return tuple(found)
 
