@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import datetime as dt
 import json
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -19,7 +18,6 @@ import numpy as np
 from filelock import FileLock, Timeout
 
 from smccli import __version__
-from smccli import dmp as dmp_mod
 from smccli.errors import LogError, TreeError
 from smccli.logs import Log, read_log
 from smccli.outputs import check_output
@@ -28,16 +26,7 @@ from smccli.perception import Cluster, clusters_from_frame, salient_cluster, sca
 from smccli.robot_model import RobotModel
 from smccli.segmentation import Fragment, SegmentMode, segment, trace_from_commands
 from smccli.sensors import CameraFrame
-from smccli.smc import (
-    TWO_PI,
-    Action,
-    SalientPerceptions,
-    Smc,
-    Source,
-    approach_in_frame,
-    goal_in_object,
-    object_yaw,
-)
+from smccli.smc import Action, SalientPerceptions, Smc, Source, action_from_path
 from smccli.tree import FORMAT, Tree, insert_chain, load_tree, save_tree
 
 #: Topics every arm log must hold for compile.
@@ -196,33 +185,8 @@ def _action(
         )
     t = np.array([c.t for c in cmds]) - cmds[0].t
     path = np.array([c.target for c in cmds], dtype=float)
-    path[:, 3] = np.unwrap(path[:, 3])
-    dmp = dmp_mod.fit(t, path, params.dmp)
-    goal_world = path[-1].copy()
-    goal_world[3] = math.remainder(goal_world[3], 2 * math.pi)
-    if cluster is not None:
-        goal, frame = goal_in_object(goal_world, cluster), "object"
-        symmetry, frame_yaw = cluster.yaw_period, object_yaw(cluster)
-    else:
-        goal, frame = goal_world, "world"
-        symmetry, frame_yaw = TWO_PI, 0.0
     grip = np.array([c.gripper for c in cmds])
-    switches = np.nonzero(np.abs(np.diff(grip)) > 0.25)[0]
-    # The last switch of the gripper command, as a phase of the fragment (1 = at its end).
-    phase = float(t[switches[-1] + 1] / t[-1]) if len(switches) and t[-1] > 0 else 1.0
-    return Action(
-        dmp=dmp,
-        goal_frame=frame,
-        goal=goal,
-        gripper_start=float(grip[0]),
-        gripper_end=float(grip[-1]),
-        gripper_phase=min(max(phase, 1e-3), 1.0),
-        symmetry=symmetry,
-        approach=approach_in_frame(
-            path, frame_yaw, params.approach_length, params.approach_samples
-        ),
-        held_symmetry=held_symmetry,
-    )
+    return action_from_path(t, path, grip, cluster, params, held_symmetry=held_symmetry)
 
 
 def _required_topics(log: Log) -> set[str]:

@@ -26,6 +26,7 @@ from scipy.spatial.transform import Rotation
 
 from smccli import dmp as dmp_mod
 from smccli.dmp import Dmp
+from smccli.params import SmcParams
 from smccli.perception import Cluster
 
 TWO_PI = 2 * math.pi
@@ -159,6 +160,48 @@ def approach_in_frame(
     u = np.minimum(np.linspace(0.0, length, n_samples), arc[-1])
     pts = np.stack([np.interp(u, arc, back[:, k]) for k in range(3)], axis=1)
     return rotate_z(pts, -frame_yaw)
+
+
+def action_from_path(
+    t: np.ndarray,
+    path: np.ndarray,
+    gripper: np.ndarray,
+    cluster: Cluster | None,
+    params: SmcParams,
+    *,
+    held_symmetry: float = 0.0,
+) -> Action:
+    """Action saliency (3.4) of a fragment: the commanded POI ``path`` (T, 4) [m, rad] at
+    times ``t`` (T,) [s] and gripper openings (T,) in [0, 1] -> the action, its goal and
+    approach in ``cluster``'s frame (the salient object; the world when None)."""
+    path = np.array(path, dtype=float)
+    path[:, 3] = np.unwrap(path[:, 3])
+    dmp = dmp_mod.fit(t, path, params.dmp)
+    goal_world = path[-1].copy()
+    goal_world[3] = math.remainder(goal_world[3], TWO_PI)
+    if cluster is not None:
+        goal, frame = goal_in_object(goal_world, cluster), "object"
+        symmetry, frame_yaw = cluster.yaw_period, object_yaw(cluster)
+    else:
+        goal, frame = goal_world, "world"
+        symmetry, frame_yaw = TWO_PI, 0.0
+    grip = np.asarray(gripper, dtype=float)
+    switches = np.nonzero(np.abs(np.diff(grip)) > 0.25)[0]
+    # The last switch of the gripper command, as a phase of the fragment (1 = at its end).
+    phase = float(t[switches[-1] + 1] / t[-1]) if len(switches) and t[-1] > 0 else 1.0
+    return Action(
+        dmp=dmp,
+        goal_frame=frame,
+        goal=goal,
+        gripper_start=float(grip[0]),
+        gripper_end=float(grip[-1]),
+        gripper_phase=min(max(phase, 1e-3), 1.0),
+        symmetry=symmetry,
+        approach=approach_in_frame(
+            path, frame_yaw, params.approach_length, params.approach_samples
+        ),
+        held_symmetry=held_symmetry,
+    )
 
 
 def goal_from_object(

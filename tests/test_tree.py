@@ -11,12 +11,18 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from smccli import dmp
 from smccli.contingency import c_f, d_a, d_p, match_context, merge
 from smccli.errors import TreeError
 from smccli.params import SmcParams, with_overrides
 from smccli.perception import Cluster
-from smccli.smc import Action, SalientPerceptions, Smc, Source, goal_from_object, goal_in_object
+from smccli.smc import (
+    SalientPerceptions,
+    Smc,
+    Source,
+    action_from_path,
+    goal_from_object,
+    goal_in_object,
+)
 from smccli.tree import ROOT, Tree, digest, insert_chain, load_tree, save_tree, tree_to_dict
 
 PARAMS = SmcParams()
@@ -58,20 +64,12 @@ def _smc(
     start = np.array([0.3, 0.0, 0.3, 0.0])
     t, y = _path(start, np.array(goal), lift)
     cluster = None if hot is None else _cluster(hot, goal[0], goal[1])
-    g = np.array(goal, dtype=float)
-    frame = "world"
-    if cluster is not None:
-        g, frame = goal_in_object(g, cluster), "object"
-    grip = {"open": 1.0, "close": 0.0}
+    opening = {"open": 1.0, "close": 0.0}
+    grip = np.full(len(t), opening[event[0]])
+    grip[-1] = opening[event[1]]  # the event at the fragment's end
     return Smc(
         SalientPerceptions(cluster=cluster, weight=weight),
-        Action(
-            dmp=dmp.fit(t, y),
-            goal_frame=frame,
-            goal=g,
-            gripper_start=grip[event[0]],
-            gripper_end=grip[event[1]],
-        ),
+        action_from_path(t, y, grip, cluster, PARAMS),
     )
 
 
