@@ -48,7 +48,8 @@ def sample_trees(tmp_path_factory, sample_logs) -> dict[str, Path]:
 
 @pytest.fixture(scope="session")
 def reseeded_logs(tmp_path_factory) -> dict[int, dict[str, list[Path]]]:
-    """The sample scripts recorded again with seeds 1 and 2 (tremor, hesitation, speed)."""
+    """The sample scripts recorded again with seeds 1 and 2 (tremor, hesitation, speed),
+    each from its own random layout, as users record them (``--randomize``)."""
     from smccli.record import RecordConfig, record
 
     root = tmp_path_factory.mktemp("reseeded")
@@ -57,9 +58,13 @@ def reseeded_logs(tmp_path_factory) -> dict[int, dict[str, list[Path]]]:
         out[seed] = {}
         for scene in SCENES:
             paths = []
-            for script in sorted((SAMPLE_LOGS / scene).glob("*.yaml")):
+            for k, script in enumerate(sorted((SAMPLE_LOGS / scene).glob("*.yaml"))):
                 path = root / f"{scene}_{script.stem}_s{seed}.mcap"
-                record(RecordConfig(scene=scene, script=script, seed=seed, output=path))
+                # Another seed per script: the scene's demonstrations start apart too.
+                cfg = RecordConfig(
+                    scene=scene, script=script, seed=10 * seed + k, output=path, randomize=True
+                )
+                record(cfg)
                 paths.append(path)
             out[seed][scene] = paths
     return out
