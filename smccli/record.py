@@ -249,10 +249,13 @@ def _session(
                 )
             )
         if sim.t > MAX_DURATION:
-            raise ScriptError(
-                f"{cfg.script or 'keyboard'}: recording passed "
-                f"{MAX_DURATION:.0f} s of simulation time; stopped"
-            )
+            if cfg.operator == "script":  # a runaway script: fix it and record again
+                raise ScriptError(
+                    f"{cfg.script}: recording passed {MAX_DURATION:.0f} s of simulation "
+                    "time; stopped"
+                )
+            stop.append(f"time limit {MAX_DURATION:.0f} s")  # a person's work: keep it
+            break
     if getattr(operator, "discarded", False):
         raise ScriptError("recording discarded by the operator; nothing written")
     return marks
