@@ -9,11 +9,16 @@ axis, a box along its longest side) inflated by a margin.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
 
+from smccli.errors import LogError
 from smccli.sensors import RobotGeometry
+
+if TYPE_CHECKING:
+    from smccli.logs import Log
 
 MARGIN = 0.012
 """Inflation of every sphere [m]: covers depth noise at the robot's surface."""
@@ -82,15 +87,36 @@ class RobotModel:
         return cls(model, mujoco.MjData(model), joint_names, robot_body_ids(model, joint_names))
 
     @classmethod
-    def from_log(cls, log) -> RobotModel:
-        """Build from the scene MJCF attached to a log and its joint names."""
-        from smccli.errors import LogError
+    def from_log(cls, log: Log) -> RobotModel:
+        """Build from the scene MJCF attached to a log and its joint names.
 
+        LogError naming the log and the attachment when the MJCF is missing, not text,
+        rejected by MuJoCo, or lacks a joint that ``/robot/joint_states`` names.
+        """
+        where = f"{log.path}: attachment scene.xml"
         xml = log.attachments.get("scene.xml")
         if xml is None:
-            raise LogError(f"{log.path}: attachment scene.xml missing (the scene's MJCF)")
-        names = log.joint_states[0].names if log.joint_states else ()
-        return cls.from_mjcf(xml.decode() if isinstance(xml, bytes) else xml, tuple(names))
+            raise LogError(f"{where} missing (the scene's MJCF)")
+        try:
+            text = xml.decode() if isinstance(xml, bytes) else xml
+        except UnicodeDecodeError as exc:
+            raise LogError(f"{where}: not UTF-8 text ({exc})") from None
+        try:
+            model = mujoco.MjModel.from_xml_string(text)
+        except ValueError as exc:  # MuJoCo's parse and compile errors
+            raise LogError(
+                f"{where}: MuJoCo rejects the MJCF ({' '.join(str(exc).split())})"
+            ) from None
+        names = tuple(log.joint_states[0].names) if log.joint_states else ()
+        unknown = [n for n in names if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) < 0]
+        if unknown:
+            have = [model.joint(i).name for i in range(model.njnt)]
+            shown = ", ".join(have[:12]) + (", ..." if len(have) > 12 else "")
+            raise LogError(
+                f"{where}: no joint {unknown[0]!r} (named by /robot/joint_states; "
+                f"the MJCF has {shown or 'no joints'})"
+            )
+        return cls(model, mujoco.MjData(model), names, robot_body_ids(model, names))
 
     def geometry_for(self, positions: np.ndarray) -> RobotGeometry:
         """Robot spheres with the joints at ``positions`` (shape (n,), order of joint_names)."""

@@ -12,16 +12,19 @@ an interrupted or concurrent compile never leaves it half-written.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
+import math
 import os
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from smccli.contingency import c_f, d_p, merge
-from smccli.errors import TreeError
+from smccli.errors import SmcError, TreeError
 from smccli.params import SmcParams, params_from_dict, params_to_dict
 from smccli.smc import Smc, Source, smc_from_dict, smc_to_dict
 
@@ -103,7 +106,7 @@ def insert_chain(tree: Tree, chain: Sequence[Smc], sources: Sequence[Source]) ->
             id=best.id,
             parent=best.parent,
             child=best.child,
-            smc=merge(best.smc, smc, best.support, 1),
+            smc=merge(best.smc, smc, best.support, 1, tree.params),
             support=best.support + 1,
             sources=(*best.sources, src),
         )
@@ -162,15 +165,73 @@ def tree_to_dict(tree: Tree) -> dict[str, Any]:
     }
 
 
-def _schema() -> dict[str, Any]:
+@functools.cache
+def _validator() -> Any:
+    """The tree schema's validator, built once (checking the schema itself costs ~10 ms)."""
+    import jsonschema
+
     from smccli.schemas import load_schema
 
-    return load_schema("tree")
+    schema = load_schema("tree")
+    cls = jsonschema.validators.validator_for(schema)
+    cls.check_schema(schema)
+    return cls(schema)
+
+
+_FLOAT_MAX = sys.float_info.max
+
+
+def _bad_number(doc: Any) -> tuple[str, str] | None:
+    """(path, problem) of the first number ``json.loads`` accepts but a tree never holds
+    (``save_tree`` writes with ``allow_nan=False``): NaN, infinity, an integer beyond float
+    range. Iterative: a document can nest deeper than Python's recursion limit."""
+    stack: list[tuple[tuple[Any, ...], Any]] = [((), doc)]
+    while stack:
+        path, value = stack.pop()
+        if isinstance(value, float) and not math.isfinite(value):
+            return "/".join(map(str, path)), f"{value} (NaN and infinity are not JSON numbers)"
+        if isinstance(value, int) and not isinstance(value, bool) and abs(value) > _FLOAT_MAX:
+            return "/".join(map(str, path)), "integer beyond float range"
+        if isinstance(value, dict):
+            stack.extend(((*path, k), v) for k, v in value.items())
+        elif isinstance(value, list):
+            stack.extend(((*path, i), v) for i, v in enumerate(value))
+    return None
+
+
+def _only_numbers(value: Any) -> bool:
+    """A number or (nested) lists of numbers; booleans and strings are not numbers."""
+    if isinstance(value, list):
+        return all(_only_numbers(v) for v in value)
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _edge_from_dict(e: dict[str, Any]) -> Edge:
+    # dmp.from_dict converts with np.asarray(..., float), which takes "inf" and "1e999"
+    # (strings) for numbers: what it converts must be numbers already.
+    dmp = e["action"]["dmp"]
+    for key in ("weights", "start", "goal", "duration"):
+        if key in dmp and not _only_numbers(dmp[key]):
+            raise TreeError(f"action/dmp/{key}: expected numbers")
+    params = dmp.get("params")
+    if isinstance(params, dict) and not all(_only_numbers(v) for v in params.values()):
+        raise TreeError("action/dmp/params: expected numbers")
+    return Edge(
+        id=e["id"],
+        parent=e["parent"],
+        child=e["child"],
+        smc=smc_from_dict(e["perception"], e["action"]),
+        support=int(e["support"]),
+        sources=tuple(
+            Source(log=s["log"], sha256=s["sha256"], t0=float(s["t0"]), t1=float(s["t1"]))
+            for s in e["sources"]
+        ),
+    )
 
 
 def tree_from_dict(doc: Any, where: str = "tree") -> Tree:
     """Validate and decode a tree document; TreeError names ``where`` and the problem."""
-    import jsonschema
+    from jsonschema.exceptions import best_match
 
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise TreeError(f'{where}: not an smc tree (expected "format": "{FORMAT}")')
@@ -179,38 +240,47 @@ def tree_from_dict(doc: Any, where: str = "tree") -> Tree:
             f"{where}: schema_version {doc.get('schema_version')!r} not supported "
             f"(this smc reads {SCHEMA_VERSION})"
         )
+    bad = _bad_number(doc)
+    if bad is not None:
+        raise TreeError(f"{where}: invalid at {bad[0] or '(top)'}: {bad[1]}")
     try:
-        jsonschema.validate(doc, _schema())
-    except jsonschema.ValidationError as exc:
-        path = "/".join(str(p) for p in exc.absolute_path) or "(top)"
-        raise TreeError(f"{where}: invalid at {path}: {exc.message}") from None
+        err = best_match(_validator().iter_errors(doc))
+    except RecursionError:
+        raise TreeError(f"{where}: nested too deeply to be an smc tree") from None
+    if err is not None:
+        path = "/".join(str(p) for p in err.absolute_path) or "(top)"
+        raise TreeError(f"{where}: invalid at {path}: {' '.join(err.message.split())[:200]}")
+    # The schema fixes the outline; what is inside params, clusters and DMPs is checked by
+    # their decoders, which raise TreeError / SmcError with the problem but not the file.
     try:
         params = params_from_dict(SmcParams, doc["params"])
-        edges = tuple(
-            Edge(
-                id=e["id"],
-                parent=e["parent"],
-                child=e["child"],
-                smc=smc_from_dict(e["perception"], e["action"]),
-                support=int(e["support"]),
-                sources=tuple(
-                    Source(log=s["log"], sha256=s["sha256"], t0=float(s["t0"]), t1=float(s["t1"]))
-                    for s in e["sources"]
-                ),
-            )
-            for e in doc["edges"]
-        )
-    except (KeyError, TypeError, ValueError) as exc:
-        raise TreeError(f"{where}: invalid content ({exc})") from None
+    except SmcError as exc:  # unknown parameter
+        raise TreeError(f"{where}: invalid at params: {exc}") from None
+    except (TypeError, ValueError, AttributeError) as exc:  # a group that is not a mapping
+        raise TreeError(f"{where}: invalid at params ({exc})") from None
+    edges = []
+    for i, e in enumerate(doc["edges"]):
+        try:
+            edges.append(_edge_from_dict(e))
+        except TreeError as exc:
+            raise TreeError(f"{where}: invalid at edges/{i}: {exc}") from None
+        except (KeyError, TypeError, ValueError) as exc:
+            raise TreeError(f"{where}: invalid at edges/{i} ({exc!r})") from None
     tree = Tree(
         params=params,
         nodes=tuple(n["id"] for n in doc["nodes"]),
-        edges=edges,
+        edges=tuple(edges),
         version=int(doc["version"]),
         history=tuple(doc["history"]),
         scene=dict(doc.get("scene", {})),
     )
-    if digest(tree) != doc["digest"]:
+    try:
+        actual = digest(tree)
+    except ValueError:  # json.dumps(allow_nan=False): a value decoded to NaN or infinity
+        raise TreeError(
+            f"{where}: a value decodes to NaN or infinity (a string in a list of numbers?)"
+        ) from None
+    if actual != doc["digest"]:
         raise TreeError(f"{where}: digest mismatch (file edited or corrupt)")
     node_ids = set(tree.nodes)
     for e in edges:
@@ -230,6 +300,10 @@ def load_tree(path: Path) -> Tree:
         raise TreeError(
             f"{path}: not valid JSON ({exc.__class__.__name__}: {str(exc).splitlines()[0]})"
         ) from None
+    except RecursionError:
+        raise TreeError(f"{path}: not valid JSON (nested too deeply)") from None
+    except OSError as exc:
+        raise TreeError(f"{path}: cannot read ({exc.strerror or exc})") from None
     return tree_from_dict(doc, str(path))
 
 

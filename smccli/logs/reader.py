@@ -11,18 +11,24 @@ import hashlib
 import io
 import json
 import logging
+import math
 import os
 import struct
+import xml.etree.ElementTree as ET
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
+from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
+from google.protobuf.message import DecodeError
 from mcap.exceptions import EndOfFile, InvalidMagic, McapError
 from mcap.records import Attachment, Channel, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
+from zstandard import ZstdError
 
 from smccli.errors import LogError, OutputExistsError
 from smccli.logs import topics as tp
@@ -109,7 +115,13 @@ class _Raw:
     cut_at: int = 0
 
     def topic(self, msg: Message) -> str:
+        """Topic of ``msg``'s channel (``_check_channels`` first: KeyError on an unknown one)."""
         return self.channels[msg.channel_id].topic
+
+
+class _BadContent(Exception):
+    """A message that parses but does not hold what its topic promises; the caller adds the
+    file, topic and time to make it a LogError."""
 
 
 def _read_bytes(path: Path) -> bytes:
@@ -151,12 +163,78 @@ def _scan(path: Path, data: bytes) -> _Raw:
     except (EndOfFile, struct.error):
         if raw.header is None:
             raise LogError(f"{path}: not an MCAP file (too short for a header)") from None
-    except (McapError, ValueError) as e:  # CRC mismatch, absurd record length, bad zstd
+    except (McapError, ValueError, ZstdError) as e:  # CRC mismatch, absurd length, bad zstd
         raise LogError(f"{path}: corrupt MCAP ({e})") from None
+    except OverflowError:  # a record length beyond what a read can ask for (> 2**63)
+        raise LogError(f"{path}: corrupt MCAP (record length out of range)") from None
+    except RuntimeError as e:  # how lz4.frame reports a corrupt lz4 chunk
+        raise LogError(f"{path}: corrupt MCAP (lz4 chunk: {e})") from None
     if not footer:
         raw.truncated = True
         raw.cut_at = stream.tell()
     return raw
+
+
+def _check_channels(path: Path, raw: _Raw) -> None:
+    """Every message has a Channel record and every channel's schema a Schema record."""
+    for cid, ch in sorted(raw.channels.items()):
+        if ch.schema_id and ch.schema_id not in raw.schemas:
+            raise LogError(
+                f"{path}: channel {cid} ({ch.topic}) refers to schema {ch.schema_id}, "
+                "which has no Schema record"
+            )
+    for m in raw.messages:
+        if m.channel_id not in raw.channels:
+            raise LogError(
+                f"{path}: message at t={m.log_time / 1e9:.3f} s on unknown channel "
+                f"{m.channel_id} (no Channel record; known: "
+                f"{', '.join(str(c) for c in sorted(raw.channels)) or 'none'})"
+            )
+
+
+def _check_mjcf(data: bytes) -> str | None:
+    """What is wrong with a ``scene.xml`` attachment, or None. Syntax only: whether MuJoCo
+    accepts the model is for its consumer (``RobotModel.from_log``) to find out."""
+    if not data.strip():
+        return "empty (expected the scene's MJCF)"
+    try:
+        root = ET.fromstring(data)
+    except ET.ParseError as e:
+        return f"not XML ({e})"
+    if root.tag != "mujoco":
+        return f"not MJCF (root element <{root.tag}>, expected <mujoco>)"
+    return None
+
+
+def _check_scene_yaml(data: bytes) -> str | None:
+    """What is wrong with a ``scene.yaml`` attachment, or None (syntax and outline only)."""
+    if not data.strip():
+        return "empty (expected the scene file)"
+    try:
+        doc = yaml.safe_load(data)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(e, "problem", None) or " ".join(str(e).split())
+        return f"not YAML ({problem}{where})"
+    if not isinstance(doc, dict):
+        return f"not a mapping (found {type(doc).__name__})"
+    return None
+
+
+_ATTACHMENT_CHECKS: dict[str, Callable[[bytes], str | None]] = {
+    "scene.xml": _check_mjcf,
+    "scene.yaml": _check_scene_yaml,
+}
+"""Attachment name -> check; attachments of other names are the user's and not looked at."""
+
+
+def _check_attachments(path: Path, raw: _Raw) -> None:
+    for a in raw.attachments:
+        check = _ATTACHMENT_CHECKS.get(a.name)
+        problem = check(a.data) if check is not None else None
+        if problem is not None:
+            raise LogError(f"{path}: attachment {a.name}: {problem}")
 
 
 def _check_times(path: Path, raw: _Raw) -> None:
@@ -172,10 +250,104 @@ def _check_times(path: Path, raw: _Raw) -> None:
 
 
 def _finite(path: Path, topic: str, t: float, a: Any) -> np.ndarray:
-    arr = np.asarray(a, dtype=float)
+    try:
+        arr = np.asarray(a, dtype=float)
+    except OverflowError:  # a JSON integer beyond float range: as good as inf
+        arr = np.array(np.inf)
     if not np.all(np.isfinite(arr)):
         raise LogError(f"{path}: NaN or inf in {topic} at t={t:.3f} s")
     return arr
+
+
+# --- JSON messages ---------------------------------------------------------------------
+
+_NUMBER = (int, float)  # JSON numbers as json.loads returns them; bool is excluded by `type(x) in`
+
+
+def _numbers(x: Any, n: int) -> bool:
+    return type(x) is list and len(x) == n and all(type(v) in _NUMBER for v in x)
+
+
+def _command_ok(obj: Any) -> bool:
+    """Sufficient (not necessary) for ``teleop_command.schema.json``, at ~1 us a message."""
+    if type(obj) is not dict or not 2 <= len(obj) <= 3:
+        return False
+    if len(obj) == 3 and not _numbers(obj.get("base_target"), 3):
+        return False
+    g = obj.get("gripper")
+    return (
+        _numbers(obj.get("target"), 4)
+        and isinstance(g, _NUMBER)
+        and type(g) is not bool
+        and 0 <= g <= 1
+    )
+
+
+def _weight_ok(obj: Any) -> bool:
+    """Sufficient for ``weight.schema.json``."""
+    return type(obj) is dict and len(obj) == 1 and type(obj.get("kg")) in _NUMBER
+
+
+# jsonschema costs ~60 us per message: 0.15 s of a 0.55 s read_log for the two 100 Hz JSON
+# topics of a 12 s demo, so those get a hand check that accepts what the schema accepts
+# in the usual form; only what it does not accept goes to jsonschema (exact verdict and
+# message). The 10 Hz and rarer topics go to jsonschema directly.
+_FAST_OK: dict[str, Callable[[Any], bool]] = {tp.COMMAND: _command_ok, tp.WEIGHT: _weight_ok}
+
+
+def _json_type(x: Any) -> str:
+    if isinstance(x, bool):
+        return "a boolean"
+    if isinstance(x, _NUMBER):
+        return "a number"
+    names = {dict: "an object", list: "an array", str: "a string", type(None): "null"}
+    return names.get(type(x), type(x).__name__)
+
+
+def _schema_problem(topic: str, obj: Any) -> str | None:
+    """Why ``obj`` does not match the topic's JSON Schema (one short phrase), or None."""
+    fast = _FAST_OK.get(topic)
+    if fast is not None and fast(obj):
+        return None
+    from jsonschema.exceptions import best_match
+
+    err = best_match(tp.json_validator(topic).iter_errors(obj))
+    if err is None:
+        return None
+    where = "/".join(str(p) for p in err.absolute_path)
+    at = f" in '{where}'" if where else ""
+    inst = err.instance
+    if err.validator == "required" and isinstance(inst, dict):
+        missing = [k for k in err.validator_value if k not in inst]
+        return f"missing field {missing[0]!r}{at}"
+    if err.validator == "additionalProperties" and isinstance(inst, dict):
+        known = set(err.schema.get("properties", {}))
+        extra = sorted(str(k) for k in inst if k not in known)
+        return f"unexpected field {extra[0]!r}{at}" if extra else err.message[:120]
+    if err.validator == "type":
+        what = f"field '{where}'" if where else "message"
+        return f"{what} is {_json_type(inst)}, expected {err.validator_value}"
+    what = f"field '{where}'" if where else "message"
+    return f"{what}: {' '.join(err.message.split())[:120]}"
+
+
+def _json_message(topic: str, data: bytes) -> Any:
+    """Parse and validate one message of a JSON topic; _BadContent says what is wrong."""
+    try:
+        obj = json.loads(data)
+    except ValueError as e:  # JSONDecodeError and UnicodeDecodeError
+        raise _BadContent(f"not JSON ({e})") from None
+    except RecursionError:
+        raise _BadContent("not JSON (nested too deeply)") from None
+    problem = _schema_problem(topic, obj)
+    if problem is not None:
+        raise _BadContent(problem)
+    return obj
+
+
+def _bad(path: Path, topic: str, t_ns: int, problem: str) -> LogError:
+    """The one error format for a message: ``demo.mcap: /topic at t=1.230 s: problem``."""
+    return LogError(f"{path}: {topic} at t={t_ns / 1e9:.3f} s: {problem}")
 
 
 def read_log(
@@ -187,18 +359,36 @@ def read_log(
 ) -> Log:
     """Read and check a log; decode only ``topics`` (all if None).
 
-    Raises LogError (one line naming the file) for a missing file, not MCAP, empty,
-    corrupt, a required topic without messages, NaN in poses, time going backwards.
-    A truncated log is read up to its last whole chunk and ``on_warning`` is told.
+    Raises LogError (one line naming the file; for a message also its topic and time) for
+    a missing file, not MCAP, empty, corrupt, no readable message, a message on an unknown
+    channel, a required topic without messages, a decoded message that does not hold what
+    its topic promises (schema, protobuf, image, point layout, NaN in poses), time going
+    backwards, a ``scene.xml`` / ``scene.yaml`` attachment that is not XML / YAML.
+    A truncated log is read up to its last whole chunk and ``on_warning`` is told; so is a
+    log without the ``smc`` metadata record.
     """
     path = Path(path)
     warn = on_warning or _log.warning
     data = _read_bytes(path)
     raw = _scan(path, data)
+    if not raw.messages:
+        why = (
+            f"truncated at byte {raw.cut_at} of {len(data)}, before its first chunk ended"
+            if raw.truncated
+            else "the log holds no messages"
+        )
+        raise LogError(f"{path}: no readable message ({why})")
     if raw.truncated:
         warn(
             f"{path}: truncated at byte {raw.cut_at} of {len(data)} (recorder killed?); "
             f"read {len(raw.messages)} messages from the whole chunks before the cut"
+        )
+    _check_channels(path, raw)
+    _check_attachments(path, raw)
+    if tp.METADATA_NAME not in raw.metadata:
+        warn(
+            f"{path}: no {tp.METADATA_NAME!r} metadata record (scene, seed and rates unknown; "
+            "not written by smc?)"
         )
     _check_times(path, raw)
     counts: dict[str, int] = {c.topic: 0 for c in raw.channels.values()}
@@ -259,22 +449,20 @@ class _Decoder:
         self.decisions: list[dict[str, Any]] = []
         self.point_clouds: list[PointCloudMsg] = []
         self.scans: list[Scan] = []
-        self.color: list[tuple[int, str, bytes]] = []
-        self.depth: dict[tuple[int, str], bytes] = {}
+        self.color: list[tuple[int, str, str, bytes]] = []
+        """(t [ns], frame_id, format, bytes) of each colour image, decoded in ``frames``."""
+        self.depth: dict[tuple[int, str], tuple[str, bytes]] = {}
         self.calib: dict[str, list[tuple[int, np.ndarray]]] = {}
         self.tf: dict[str, list[tuple[int, np.ndarray]]] = {}
 
     def _parse(self, topic: str, m: Message) -> Any:
         ch = self.raw.channels[m.channel_id]
-        schema = self.raw.schemas.get(ch.schema_id)
         if topic in tp.JSON_TOPICS:
             if ch.message_encoding != "json":
                 raise LogError(f"{self.path}: {topic} is {ch.message_encoding}, expected json")
-            try:
-                return json.loads(m.data)
-            except ValueError as e:
-                raise LogError(f"{self.path}: bad JSON on {topic} ({e})") from None
+            return _json_message(topic, m.data)
         cls = tp.PROTO_TOPICS[topic]
+        schema = self.raw.schemas.get(ch.schema_id)
         name = schema.name if schema else "?"
         if ch.message_encoding != "protobuf" or name != cls.DESCRIPTOR.full_name:
             raise LogError(
@@ -282,7 +470,10 @@ class _Decoder:
                 f"expected protobuf {cls.DESCRIPTOR.full_name}"
             )
         msg = cls()
-        msg.ParseFromString(m.data)
+        try:
+            msg.ParseFromString(m.data)
+        except DecodeError as e:
+            raise _BadContent(f"protobuf does not decode ({e})") from None
         return msg
 
     def add(self, m: Message) -> None:
@@ -291,43 +482,45 @@ class _Decoder:
             topic not in tp.JSON_TOPICS and topic not in tp.PROTO_TOPICS
         ):
             return
-        msg, t_ns = self._parse(topic, m), m.log_time
+        try:
+            self._add(topic, m.log_time, self._parse(topic, m))
+        except _BadContent as e:
+            raise _bad(self.path, topic, m.log_time, str(e)) from None
+
+    def _add(self, topic: str, t_ns: int, msg: Any) -> None:
         t = t_ns / 1e9
         if topic == tp.COMMAND:
             target = _finite(self.path, topic, t, msg["target"])
-            self.commands.append(PoiCommand(t=t, target=target, gripper=float(msg["gripper"])))
+            gripper = float(_finite(self.path, topic, t, msg["gripper"]))
+            self.commands.append(PoiCommand(t=t, target=target, gripper=gripper))
         elif topic == tp.JOINT_STATES:
-            j = msg.joints
-            self.joint_states.append(
-                JointState(
-                    t=t,
-                    names=tuple(x.name for x in j),
-                    position=np.array([x.position for x in j]),
-                    velocity=np.array([x.velocity for x in j]),
-                    effort=np.array([x.effort for x in j]),
-                )
-            )
+            self.joint_states.append(self._joint_state(t, msg))
         elif topic == tp.POI:
             pos, q = tp.get_pose(msg.pose)
+            _finite(self.path, topic, t, [*pos, *q])
+            _rotation(q, "orientation")
             self.poi_t.append(t)
-            self.poi.append(_finite(self.path, topic, t, [*pos, tp.quat_to_yaw(q)]))
+            self.poi.append(np.array([*pos, tp.quat_to_yaw(q)]))
         elif topic == tp.COLOR:
-            self.color.append((t_ns, msg.frame_id, msg.data))
+            self.color.append((t_ns, msg.frame_id, msg.format, msg.data))
         elif topic == tp.DEPTH:
-            self.depth[(t_ns, msg.frame_id)] = msg.data
+            self.depth[(t_ns, msg.frame_id)] = (msg.format, msg.data)
         elif topic == tp.CALIBRATION:
-            K = np.array(msg.K, dtype=float).reshape(3, 3)
+            if len(msg.K) != 9:
+                raise _BadContent(f"K holds {len(msg.K)} values, expected 9 (3x3, row-major)")
+            K = _finite(self.path, topic, t, msg.K).reshape(3, 3)
             self.calib.setdefault(msg.frame_id, []).append((t_ns, K))
         elif topic == tp.TF:
             for tr in msg.transforms:
                 pos, q = tp.get_pose(tr)
                 _finite(self.path, topic, t, [*pos, *q])
+                _rotation(q, f"rotation of {tr.parent_frame_id} -> {tr.child_frame_id}")
                 T = np.eye(4)
                 T[:3, :3], T[:3, 3] = tp.quat_to_matrix(q), pos
                 self.tf.setdefault(tr.child_frame_id, []).append((t_ns, T))
         elif topic == tp.WEIGHT:
             self.weight_t.append(t)
-            self.weight.append(float(msg["kg"]))
+            self.weight.append(float(_finite(self.path, topic, t, msg["kg"])))
         elif topic == tp.SALIENCY:
             self.marks.append(SaliencyMark(t=t, source=msg["source"], label=msg.get("label", "")))
         elif topic == tp.GROUND_TRUTH:
@@ -341,20 +534,46 @@ class _Decoder:
             ranges = np.array(msg.ranges, dtype=float)
             self.scans.append(Scan(t, msg.start_angle, msg.end_angle, ranges, msg.frame_id))
 
+    def _joint_state(self, t: float, msg: Any) -> JointState:
+        j = msg.joints
+        names = tuple(x.name for x in j)
+        if self.joint_states and names != self.joint_states[0].names:
+            # Compile indexes every reading by the first one's names (fingers, robot model).
+            first = self.joint_states[0].names
+            raise _BadContent(
+                f"joints ({_names(names)}) differ from the first message's ({_names(first)})"
+            )
+        position = np.array([x.position for x in j])
+        if not np.all(np.isfinite(position)):
+            raise _BadContent("NaN or inf in joint positions")
+        return JointState(
+            t=t,
+            names=names,
+            position=position,
+            velocity=np.array([x.velocity for x in j]),
+            effort=np.array([x.effort for x in j]),
+        )
+
     def frames(self) -> list[CameraFrame]:
-        """Colour frames joined with depth (same time), latest calibration and camera pose."""
+        """Colour frames joined with depth (same time), latest calibration and camera pose.
+
+        An image that does not decode is a LogError naming its topic and time; a colour
+        image without depth, calibration or pose is dropped (with a warning, except the
+        last one of a truncated log, whose depth may have been in the lost chunk).
+        """
         want_depth = self.wanted is None or tp.DEPTH in self.wanted
         out, dropped = [], 0
-        for t_ns, frame_id, data in self.color:
+        for t_ns, frame_id, fmt, data in self.color:
             K = _latest(self.calib.get(frame_id, []), t_ns)
             T = _latest(self.tf.get(frame_id, []), t_ns)
             rgb = tp.decode_color(data)
+            if rgb is None:
+                raise _bad(self.path, tp.COLOR, t_ns, f"image does not decode {_image(fmt, data)}")
+            depth: np.ndarray | None = np.zeros((0, 0), np.float32)
             if want_depth:
-                dbytes = self.depth.get((t_ns, frame_id))
-                depth = tp.decode_depth(dbytes) if dbytes is not None else None
-            else:
-                depth = np.zeros((0, 0), np.float32)
-            if K is None or T is None or rgb is None or depth is None:
+                stored = self.depth.get((t_ns, frame_id))
+                depth = None if stored is None else self._depth(t_ns, *stored, rgb.shape[:2])
+            if K is None or T is None or depth is None:
                 dropped += 1
                 continue
             out.append(CameraFrame(t_ns / 1e9, rgb, depth, K, T, frame_id))
@@ -363,6 +582,44 @@ class _Decoder:
             self.warn(f"{self.path}: {dropped} camera frames lack depth, calibration or pose")
         return out
 
+    def _depth(self, t_ns: int, fmt: str, data: bytes, shape: tuple[int, ...]) -> np.ndarray:
+        img = tp.decode_image(data)
+        if img is None:
+            raise _bad(self.path, tp.DEPTH, t_ns, f"image does not decode {_image(fmt, data)}")
+        if img.ndim != 2 or img.dtype != np.uint16:
+            found = f"{img.dtype} {'x'.join(str(n) for n in img.shape)}"
+            raise _bad(
+                self.path, tp.DEPTH, t_ns, f"expected a 16-bit one-channel image, found {found}"
+            )
+        if img.shape != shape:
+            raise _bad(
+                self.path,
+                tp.DEPTH,
+                t_ns,
+                f"depth {img.shape[1]}x{img.shape[0]} differs from the colour image's "
+                f"{shape[1]}x{shape[0]}",
+            )
+        return (img.astype(np.float32) / np.float32(tp.DEPTH_SCALE)).astype(np.float32)
+
+
+def _names(names: tuple[str, ...], limit: int = 8) -> str:
+    shown = ", ".join(names[:limit]) + (", ..." if len(names) > limit else "")
+    return f"{len(names)}: {shown}" if names else "none"
+
+
+def _image(fmt: str, data: bytes) -> str:
+    return f"(format {fmt!r}, {len(data)} bytes)"
+
+
+def _rotation(q: np.ndarray, what: str) -> None:
+    """A finite quaternion that is a rotation: of unit norm (we write them normalised;
+    1e-3 leaves room for float32 writers). A zero one is an unset field."""
+    norm = math.hypot(*q)  # no overflow, unlike np.linalg.norm, for absurd components
+    if norm == 0:
+        raise _BadContent(f"{what} is the zero quaternion (unset?)")
+    if abs(norm - 1) > 1e-3:
+        raise _BadContent(f"{what} is not a rotation (quaternion of norm {norm:.6g}, expected 1)")
+
 
 def _latest(series: list[tuple[int, np.ndarray]], t_ns: int) -> np.ndarray | None:
     """Value of the last entry at or before ``t_ns`` (series in time order)."""
@@ -370,16 +627,45 @@ def _latest(series: list[tuple[int, np.ndarray]], t_ns: int) -> np.ndarray | Non
     return series[i - 1][1] if i else None
 
 
+_F = PackedElementField
+
+
+def _kind(t: int) -> str:
+    """Name of a PackedElementField type (proto3 enums are open: any int may come)."""
+    return _F.NumericType.Name(t) if t in _F.NumericType.values() else f"type {t}"
+
+
 def _decode_points(t: float, msg: Any) -> PointCloudMsg:
-    fields = {f.name: f.offset for f in msg.fields}
+    """A foxglove PointCloud with float32 ``x y z`` and optional uint8 ``red green blue``."""
     stride = msg.point_stride
+    if stride == 0:
+        raise _BadContent("point_stride is 0")
+    if len(msg.data) % stride:
+        raise _BadContent(
+            f"data holds {len(msg.data)} bytes, not a multiple of point_stride {stride}"
+        )
+    fields = {f.name: f for f in msg.fields}
+    colors_named = all(c in fields for c in ("red", "green", "blue"))
+    for name, kind, size in [
+        *((c, _F.FLOAT32, 4) for c in "xyz"),
+        *((c, _F.UINT8, 1) for c in ("red", "green", "blue") if colors_named),
+    ]:
+        f = fields.get(name)
+        if f is None:
+            raise _BadContent(f"no field {name!r} (fields: {', '.join(fields) or 'none'})")
+        if f.type != kind:
+            raise _BadContent(f"field {name!r} is {_kind(f.type)}, expected {_kind(kind)}")
+        if f.offset + size > stride:
+            raise _BadContent(
+                f"field {name!r} at offset {f.offset} ({size} bytes) lies beyond "
+                f"point_stride {stride}"
+            )
     buf = np.frombuffer(msg.data, dtype=np.uint8).reshape(-1, stride)
-    pts = np.stack(
-        [buf[:, fields[c] : fields[c] + 4].copy().view("<f4")[:, 0] for c in "xyz"], axis=1
-    )
+    off = {c: fields[c].offset for c in fields}
+    pts = np.stack([buf[:, off[c] : off[c] + 4].copy().view("<f4")[:, 0] for c in "xyz"], axis=1)
     colors = None
-    if all(c in fields for c in ("red", "green", "blue")):
-        colors = np.stack([buf[:, fields[c]] for c in ("red", "green", "blue")], axis=1)
+    if colors_named:
+        colors = np.stack([buf[:, off[c]] for c in ("red", "green", "blue")], axis=1)
     return PointCloudMsg(t, pts.astype(np.float32), colors, msg.frame_id)
 
 
@@ -388,13 +674,17 @@ def log_summary(path: str | os.PathLike[str]) -> dict[str, Any]:
     path = Path(path)
     data = _read_bytes(path)
     raw = _scan(path, data)
+    _check_channels(path, raw)
     per: dict[str, list[int]] = {c.topic: [] for c in raw.channels.values()}
     marks = []
     for m in raw.messages:
         topic = raw.topic(m)
         per[topic].append(m.log_time)
-        if topic == tp.SALIENCY:
-            obj = json.loads(m.data)
+        if topic == tp.SALIENCY and raw.channels[m.channel_id].message_encoding == "json":
+            try:
+                obj = _json_message(topic, m.data)
+            except _BadContent as e:
+                raise _bad(path, topic, m.log_time, str(e)) from None
             marks.append({"t": m.log_time / 1e9, "source": obj["source"], "label": obj["label"]})
     times = [m.log_time for m in raw.messages]
     start, end = (min(times), max(times)) if times else (0, 0)
@@ -428,6 +718,7 @@ def strip_topic(
     keep their bytes, times and order."""
     src, dst = Path(src), Path(dst)
     raw = _scan(src, _read_bytes(src))
+    _check_channels(src, raw)
     topics = sorted({c.topic for c in raw.channels.values()})
     if topic not in topics:
         raise LogError(f"{src}: no topic {topic} (topics: {', '.join(topics)})")

@@ -89,7 +89,8 @@ def json_schema_name(topic: str) -> str:
 
 @functools.cache
 def json_validator(topic: str) -> Any:
-    import jsonschema  # only needed when writing
+    """The topic's JSON Schema validator, built once per topic (writing and reading)."""
+    import jsonschema  # imported on first use (~60 ms)
 
     schema = json.loads(json_schema_bytes(topic))
     return jsonschema.Draft202012Validator(schema)
@@ -195,8 +196,20 @@ def encode_depth(depth: np.ndarray) -> bytes:
 
 
 def decode_image(data: bytes) -> np.ndarray | None:
-    """Compressed image bytes -> array as stored (colour comes back BGR, depth as uint16)."""
-    return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    """Compressed image bytes -> array as stored (colour comes back BGR, depth as uint16);
+    None when the bytes do not decode (the caller says which message)."""
+    if not data:
+        return None  # cv2.imdecode asserts on an empty buffer
+    # OpenCV logs broken input to stderr (a torn PNG, chunks out of order); the caller
+    # reports the failure itself, as one line naming the message.
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    try:
+        return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    except cv2.error:  # how OpenCV reports some malformed inputs (it returns None for most)
+        return None
+    finally:
+        cv2.utils.logging.setLogLevel(level)
 
 
 def decode_color(data: bytes) -> np.ndarray | None:
