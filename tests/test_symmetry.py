@@ -17,7 +17,14 @@ from smccli.contingency import align, d_a, merge
 from smccli.params import SmcParams
 from smccli.perception import Cluster
 from smccli.record import RecordConfig, record
-from smccli.smc import TWO_PI, SalientPerceptions, Smc, action_from_path, goal_from_object
+from smccli.smc import (
+    TWO_PI,
+    SalientPerceptions,
+    Smc,
+    action_from_path,
+    approach_in_frame,
+    goal_from_object,
+)
 from smccli.tree import ROOT, load_tree
 
 SCENE = Path(__file__).parent / "scenes" / "mug_place"
@@ -118,3 +125,16 @@ def test_the_mug_lands_with_its_handle_where_it_was_shown(mug_tree):
         assert abs(math.remainder(end_yaw - math.pi / 2, TWO_PI)) < 0.35, (seed, end_yaw)
         turned += abs(math.remainder(start_yaw - math.pi / 2, TWO_PI)) > math.pi / 2
     assert turned >= 2  # some layouts needed the wrist to turn the handle round
+
+
+def test_the_approach_ignores_tremor_while_the_gripper_closes(rng):
+    """A descent from above, then a second and a half of 1 mm tremor at the goal (the
+    operator holds still while the fingers close): the approach is still the descent."""
+    descent = np.stack([np.full(50, 0.5), np.zeros(50), np.linspace(0.15, 0.02, 50)], axis=1)
+    goal = descent[-1]
+    tremor = goal + rng.normal(0.0, 0.001, (150, 3))
+    tremor[-1] = goal
+    still = approach_in_frame(descent, 0.0, 0.1, 20)
+    shaky = approach_in_frame(np.vstack([descent, tremor]), 0.0, 0.1, 20)
+    np.testing.assert_allclose(still[:, 2], np.linspace(0.0, 0.1, 20), atol=1e-9)
+    assert np.sqrt(np.mean(np.sum((still - shaky) ** 2, axis=1))) < 0.003
