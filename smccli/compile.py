@@ -120,16 +120,17 @@ def extract_chain(log: Log, params: SmcParams, mode: SegmentMode) -> Chain:
             f"{name}: no saliency marks; the whole log is one fragment (try --segment auto)"
         )
     frags = fragments(log, params, mode)
-    if log.truncated:
+    if log.truncated or log.interrupted:
         # Only what a boundary closed is a whole fragment: the rest was cut mid-action.
+        how = "truncated" if log.truncated else f"interrupted ({log.end.get('reason', '?')})"
         t_end = float(log.poi_t[-1]) if len(log.poi_t) else 0.0
         if frags[-1].cause == "end":
             raise LogError(
-                f"{log.path}: truncated at t={t_end:.1f} s before its first fragment "
+                f"{log.path}: {how} at t={t_end:.1f} s before its first fragment "
                 "boundary; no complete fragment to compile"
             )
         warnings.append(
-            f"{name}: truncated at t={t_end:.1f} s; compiled {len(frags)} complete "
+            f"{name}: {how} at t={t_end:.1f} s; compiled {len(frags)} complete "
             f"fragment(s) up to t={frags[-1].t1:.1f} s, dropped the last "
             f"{t_end - frags[-1].t1:.1f} s"
         )

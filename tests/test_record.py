@@ -13,6 +13,7 @@ import pytest
 from conftest import SAMPLE_LOGS
 from mcap.reader import make_reader
 
+from smccli.compile import compile_logs
 from smccli.errors import OutputExistsError
 from smccli.logs import read_log
 from smccli.record import RecordConfig, record
@@ -213,7 +214,7 @@ def test_interrupted_recorder_keeps_a_valid_log(tmp_path, sig):
     marked interrupted, holding what was recorded up to the signal."""
     out = tmp_path / "stopped.mcap"
     proc = _start_recorder(out)
-    reached, _ = _wait_until_sim_time(proc, 2.0)
+    reached, _ = _wait_until_sim_time(proc, 4.5)  # after the grasp's mark (about 3 s)
     proc.send_signal(sig)
     _, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 130, stderr
@@ -228,3 +229,9 @@ def test_interrupted_recorder_keeps_a_valid_log(tmp_path, sig):
     assert t_last >= reached - 1e-9
     log = read_log(out)
     assert not log.truncated and log.poi_t[-1] >= reached - 0.011
+    assert log.interrupted and log.end["reason"] == sig.name
+    # Compile keeps the complete fragment (the grasp) and says what it dropped.
+    warnings: list[str] = []
+    result = compile_logs([out], tmp_path / "tree.json", on_warning=warnings.append)
+    assert len(result.tree.edges) == 1
+    assert any(f"interrupted ({sig.name})" in w and "dropped the last" in w for w in warnings)

@@ -19,10 +19,10 @@ import json
 import math
 import os
 import zlib
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any, Literal
+from typing import Any, Literal
 
 import numpy as np
 from google.protobuf.descriptor import FieldDescriptor
@@ -30,11 +30,18 @@ from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import Attachment, Channel, Chunk, Footer, Statistics
 from mcap.stream_reader import CRCValidationError, get_chunk_data_stream
-from mcap.writer import CompressionType, Writer
 
 from smccli.errors import LogError, OutputError, SmcError
 from smccli.logs import topics as tp
-from smccli.logs.reader import Log, _decode_points, _Raw, _read_bytes, _scan, read_log
+from smccli.logs.reader import (
+    Log,
+    _decode_points,
+    _Raw,
+    _read_bytes,
+    _scan,
+    copy_log,
+    read_log,
+)
 from smccli.outputs import check_output, write_atomic
 
 Status = Literal["ok", "warn", "error"]
@@ -638,57 +645,6 @@ def _diagnosis(path: Path, checks: list[Check]) -> Diagnosis:
 
 
 # --- repair ---
-
-
-def copy_log(
-    raw: _Raw,
-    out: IO[bytes],
-    *,
-    keep: Callable[[Channel], bool] | None = None,
-    extra_metadata: Mapping[str, Mapping[str, str]] | None = None,
-) -> int:
-    """Write ``raw`` as a complete, indexed MCAP (zstd chunks, summary) to ``out``.
-
-    Header profile and library, metadata, attachments, the schemas, the channels ``keep``
-    accepts (all by default) and their messages, in file order with their times and
-    sequence numbers, then ``extra_metadata`` records. Schemas no channel uses are kept
-    too. Returns the messages written.
-    """
-    # NOTE for the lead: reader.strip_topic does the same copy (metadata, attachments, then
-    # schema + channel per kept channel, then messages); it could call
-    # copy_log(raw, f, keep=lambda ch: ch.topic != topic). The only difference: strip_topic
-    # drops schemas no channel uses, copy_log keeps them (a repair must keep every schema).
-    w = Writer(out, compression=CompressionType.ZSTD)
-    header = raw.header
-    w.start(profile=header.profile if header else "", library=header.library if header else "smc")
-    for name, meta in raw.metadata.items():
-        w.add_metadata(name, meta)
-    for a in raw.attachments:
-        w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
-    schema_ids: dict[int, int] = {}
-    channel_ids: dict[int, int] = {}
-    for cid, ch in sorted(raw.channels.items()):
-        if keep is not None and not keep(ch):
-            continue
-        if ch.schema_id and ch.schema_id not in schema_ids and ch.schema_id in raw.schemas:
-            s = raw.schemas[ch.schema_id]
-            schema_ids[ch.schema_id] = w.register_schema(s.name, s.encoding, s.data)
-        channel_ids[cid] = w.register_channel(
-            ch.topic, ch.message_encoding, schema_ids.get(ch.schema_id, 0), ch.metadata
-        )
-    used = {ch.schema_id for ch in raw.channels.values()}
-    for sid, s in sorted(raw.schemas.items()):
-        if sid not in used:
-            w.register_schema(s.name, s.encoding, s.data)
-    n = 0
-    for m in raw.messages:
-        if m.channel_id in channel_ids:
-            w.add_message(channel_ids[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence)
-            n += 1
-    for extra_name, extra_meta in (extra_metadata or {}).items():
-        w.add_metadata(extra_name, dict(extra_meta))
-    w.finish()
-    return n
 
 
 def _same_file(a: Path, b: Path) -> bool:

@@ -15,10 +15,10 @@ import math
 import os
 import struct
 import xml.etree.ElementTree as ET
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 import yaml
@@ -30,9 +30,9 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 from zstandard import ZstdError
 
-from smccli.errors import LogError, OutputExistsError
+from smccli.errors import LogError
 from smccli.logs import topics as tp
-from smccli.logs.writer import part_path
+from smccli.outputs import check_output, write_atomic
 from smccli.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
 _log = logging.getLogger(__name__)
@@ -99,6 +99,14 @@ class Log:
     """True when the file ends before its footer (killed recorder, ``.part`` file)."""
     point_clouds: list[PointCloudMsg] = field(default_factory=list)
     scans: list[Scan] = field(default_factory=list)
+    end: dict[str, str] = field(default_factory=dict)
+    """The ``smc_end`` metadata record: how the recording ended (``end`` = complete |
+    interrupted, ``reason``); empty for a log cut short or written before it existed."""
+
+    @property
+    def interrupted(self) -> bool:
+        """Whether the recording stopped before its operator finished (signal, repair)."""
+        return self.end.get("end") == "interrupted"
 
 
 @dataclass(slots=True)
@@ -406,6 +414,7 @@ def read_log(
         path=path,
         sha256=hashlib.sha256(data).hexdigest(),
         metadata=raw.metadata.get(tp.METADATA_NAME, {}),
+        end=raw.metadata.get(tp.END_METADATA_NAME, {}),
         attachments={a.name: a.data for a in raw.attachments},
         commands=d.commands,
         joint_states=d.joint_states,
@@ -707,6 +716,53 @@ def log_summary(path: str | os.PathLike[str]) -> dict[str, Any]:
     }
 
 
+def copy_log(
+    raw: _Raw,
+    out: IO[bytes],
+    *,
+    keep: Callable[[Channel], bool] | None = None,
+    extra_metadata: Mapping[str, Mapping[str, str]] | None = None,
+) -> int:
+    """Write ``raw`` as a complete, indexed MCAP (zstd chunks, summary) to ``out``.
+
+    Header profile and library, metadata, attachments, the schemas, the channels ``keep``
+    accepts (all by default) and their messages, in file order with their times and
+    sequence numbers, then ``extra_metadata`` records. Schemas no channel uses are kept
+    too. Returns the messages written.
+    """
+    w = Writer(out, compression=CompressionType.ZSTD)
+    header = raw.header
+    w.start(profile=header.profile if header else "", library=header.library if header else "smc")
+    for name, meta in raw.metadata.items():
+        w.add_metadata(name, meta)
+    for a in raw.attachments:
+        w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
+    schema_ids: dict[int, int] = {}
+    channel_ids: dict[int, int] = {}
+    for cid, ch in sorted(raw.channels.items()):
+        if keep is not None and not keep(ch):
+            continue
+        if ch.schema_id and ch.schema_id not in schema_ids and ch.schema_id in raw.schemas:
+            s = raw.schemas[ch.schema_id]
+            schema_ids[ch.schema_id] = w.register_schema(s.name, s.encoding, s.data)
+        channel_ids[cid] = w.register_channel(
+            ch.topic, ch.message_encoding, schema_ids.get(ch.schema_id, 0), ch.metadata
+        )
+    used = {ch.schema_id for ch in raw.channels.values()}
+    for sid, s in sorted(raw.schemas.items()):
+        if sid not in used:
+            w.register_schema(s.name, s.encoding, s.data)
+    n = 0
+    for m in raw.messages:
+        if m.channel_id in channel_ids:
+            w.add_message(channel_ids[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence)
+            n += 1
+    for extra_name, extra_meta in (extra_metadata or {}).items():
+        w.add_metadata(extra_name, dict(extra_meta))
+    w.finish()
+    return n
+
+
 def strip_topic(
     src: str | os.PathLike[str],
     dst: str | os.PathLike[str],
@@ -715,46 +771,15 @@ def strip_topic(
     force: bool = False,
 ) -> Path:
     """Copy ``src`` to ``dst`` without ``topic`` (e.g. ``/sim/ground_truth``); other messages
-    keep their bytes, times and order."""
+    keep their bytes, times and order. ``dst`` is written atomically."""
     src, dst = Path(src), Path(dst)
     raw = _scan(src, _read_bytes(src))
     _check_channels(src, raw)
     topics = sorted({c.topic for c in raw.channels.values()})
     if topic not in topics:
         raise LogError(f"{src}: no topic {topic} (topics: {', '.join(topics)})")
-    if dst.exists() and not force:
-        raise OutputExistsError(f"{dst}: exists (use --force to overwrite)")
-    part = part_path(dst)
-    try:
-        with open(part, "wb") as f:
-            w = Writer(f, compression=CompressionType.ZSTD)
-            w.start(
-                profile=raw.header.profile if raw.header else "",
-                library=raw.header.library if raw.header else "smc",
-            )
-            for name, meta in raw.metadata.items():
-                w.add_metadata(name, meta)
-            for a in raw.attachments:
-                w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
-            schema_ids: dict[int, int] = {}
-            channel_ids: dict[int, int] = {}
-            for cid, ch in sorted(raw.channels.items()):
-                if ch.topic == topic:
-                    continue
-                if ch.schema_id and ch.schema_id not in schema_ids:
-                    s = raw.schemas[ch.schema_id]
-                    schema_ids[ch.schema_id] = w.register_schema(s.name, s.encoding, s.data)
-                channel_ids[cid] = w.register_channel(
-                    ch.topic, ch.message_encoding, schema_ids.get(ch.schema_id, 0), ch.metadata
-                )
-            for m in raw.messages:
-                if m.channel_id in channel_ids:
-                    w.add_message(
-                        channel_ids[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence
-                    )
-            w.finish()
-        os.replace(part, dst)
-    except BaseException:
-        part.unlink(missing_ok=True)
-        raise
+    check_output(dst, force=force)
+    buf = io.BytesIO()
+    copy_log(raw, buf, keep=lambda ch: ch.topic != topic)
+    write_atomic(dst, buf.getvalue())
     return dst
