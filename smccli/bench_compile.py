@@ -50,6 +50,7 @@ def demos(
 ) -> list[Path]:
     """``n`` recordings of a script, each from its own random layout (``--randomize``) with
     seeds ``first_seed``.. (cached). A relative ``script`` is a sample script of ``scene``."""
+    from smccli.logs import read_log
     from smccli.record import RecordConfig, record
 
     CACHE.mkdir(parents=True, exist_ok=True)
@@ -58,6 +59,8 @@ def demos(
     out = []
     for seed in range(first_seed, first_seed + n):
         path = CACHE / f"{scene}_{script.stem}_r{seed}.mcap"
+        if path.exists() and read_log(path, topics=()).interrupted:
+            path.unlink()  # a benchmark stopped mid-recording: record it again
         if not path.exists():
             record(
                 RecordConfig(
