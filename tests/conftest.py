@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import hashlib
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +16,27 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 REPO = Path(__file__).resolve().parent.parent
 SAMPLE_LOGS = REPO / "sample_logs"
 SCENES = ("pick_place", "weigh_sort", "bench_pick")
+
+
+SMC_ENV = {**os.environ, "COLUMNS": "250", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+"""The real command's environment: wide tables (rows do not wrap), headless rendering."""
+
+
+def smc(*args: str | Path, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    """Run the real ``smc`` command (``python -m smccli.cli ARGS``) in a subprocess."""
+    return subprocess.run(
+        [sys.executable, "-m", "smccli.cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=SMC_ENV,
+        cwd=REPO,
+    )
+
+
+def sha256(path: Path) -> str:
+    """Hex SHA-256 of a file's bytes (to show an output was left byte-identical)."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 @pytest.fixture

@@ -9,17 +9,14 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import hashlib
-import os
 import shutil
-import subprocess
-import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import sha256, smc
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.JointStates_pb2 import JointStates
@@ -34,7 +31,6 @@ from smccli.robot_model import RobotModel
 
 REPO = Path(__file__).resolve().parent.parent
 SAMPLE = REPO / "sample_logs" / "pick_place" / "demo1.mcap"
-ENV = {**os.environ, "COLUMNS": "250", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
 # A scene.xml that is well-formed MJCF XML but that MuJoCo refuses (a geom without size).
 REJECTED_MJCF = b"<mujoco><worldbody><geom type='box'/></worldbody></mujoco>"
 
@@ -330,21 +326,6 @@ CASES = [
 BY_NAME = {c.name: c for c in CASES}
 
 
-def sha(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-def smc(*args: str | Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "smccli.cli", *map(str, args)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env=ENV,
-        cwd=REPO,
-    )
-
-
 @pytest.fixture(scope="module")
 def good_tree(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The sample log compiled once; each test works on a copy."""
@@ -383,7 +364,7 @@ def test_cli_refuses_bad_log(case: Case, command: str, good_tree: Path, tmp_path
     shutil.copyfile(good_tree, tree)
     rrd = tmp_path / "out.rrd"
     rrd.write_bytes(b"a recording from before")
-    before = {p.name: sha(p) for p in (tree, rrd)}
+    before = {p.name: sha256(p) for p in (tree, rrd)}
     if command == "compile":
         proc = smc("compile", bad, "-o", tree)
     else:
@@ -394,7 +375,7 @@ def test_cli_refuses_bad_log(case: Case, command: str, good_tree: Path, tmp_path
     assert lines[0].startswith("error: ") and str(bad) in lines[0], lines[0]
     for part in expected:
         assert part in lines[0], (part, lines[0])
-    assert {p.name: sha(p) for p in (tree, rrd)} == before
+    assert {p.name: sha256(p) for p in (tree, rrd)} == before
     assert sorted(p.name for p in tmp_path.iterdir() if not p.name.endswith(".lock")) == sorted(
         [bad.name, "out.rrd", "tree.json"]
     )

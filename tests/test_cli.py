@@ -2,23 +2,8 @@
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-
 import pytest
-
-ENV = {**os.environ, "COLUMNS": "250"}
-
-
-def smc(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "smccli.cli", *args],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        env=ENV,
-    )
+from conftest import smc
 
 
 def test_help_lists_the_commands():

@@ -4,9 +4,7 @@
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import math
-import os
 import signal
 import subprocess
 import sys
@@ -15,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO, SAMPLE_LOGS
+from conftest import REPO, SAMPLE_LOGS, SMC_ENV, sha256, smc
 from foxglove_schemas_protobuf.JointStates_pb2 import JointStates
 from mcap.reader import make_reader
 from mcap.records import Channel, Message
@@ -26,7 +24,6 @@ from smccli.logs import topics as tp
 from smccli.logs.doctor import copy_log, diagnose, exit_code, repair
 from smccli.logs.reader import _Raw, _read_bytes, _scan
 
-ENV = {**os.environ, "COLUMNS": "250", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
 DEMO = SAMPLE_LOGS / "pick_place" / "demo1.mcap"
 CHECKS = (
     "file",
@@ -42,21 +39,6 @@ CHECKS = (
     "numbers",
     "saliency",
 )
-
-
-def smc(*args: str | Path) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "smccli.cli", *map(str, args)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env=ENV,
-        cwd=REPO,
-    )
-
-
-def sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def row(stdout: str, name: str) -> str:
@@ -174,7 +156,7 @@ def test_killed_recorder_part_is_repaired(tmp_path):
     cmd = [sys.executable, "-m", "smccli.cli", "record", "--scene", "weigh_sort"]
     cmd += ["--script", str(script), "--realtime", "-o", str(log)]
     with open(tmp_path / "record.err", "wb") as err:
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, env=ENV, cwd=REPO)
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, env=SMC_ENV, cwd=REPO)
         try:
             deadline = time.monotonic() + 120  # a loop guard only, never asserted on
             while time.monotonic() < deadline and proc.poll() is None:

@@ -3,26 +3,18 @@ overwrites without ``--force``, and writes its files atomically."""
 
 from __future__ import annotations
 
-import hashlib
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
-from conftest import SAMPLE_LOGS
+from conftest import SAMPLE_LOGS, sha256, smc
 
 from smccli.errors import OutputError, OutputExistsError
 from smccli.outputs import check_output, write_atomic
 
 LOG = SAMPLE_LOGS / "bench_pick" / "demo.mcap"
 SCRIPT = SAMPLE_LOGS / "bench_pick" / "demo.yaml"
-
-
-def smc(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "smccli.cli", *args], capture_output=True, text=True, timeout=300
-    )
 
 
 @pytest.fixture(scope="module")
@@ -94,10 +86,10 @@ def test_existing_output_is_kept_without_force(tree, tmp_path, name):
 def test_compile_adds_to_an_existing_tree_but_refuses_a_non_tree(tmp_path):
     out = tmp_path / "notes.json"
     out.write_text('{"mine": true}\n')
-    before = hashlib.sha256(out.read_bytes()).hexdigest()
+    before = sha256(out)
     line = _one_line(smc("compile", str(LOG), "-o", str(out)))
     assert "notes.json" in line and "not an smc tree" in line
-    assert hashlib.sha256(out.read_bytes()).hexdigest() == before
+    assert sha256(out) == before
 
 
 def test_unfinished_recording_is_never_overwritten(tmp_path):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import re
 import signal
 import subprocess
@@ -10,7 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import SAMPLE_LOGS
+from conftest import SAMPLE_LOGS, sha256, smc
 from mcap.reader import make_reader
 
 from smccli.compile import compile_logs
@@ -29,12 +28,6 @@ PROTO = {
     "/perception/points",
 }
 JSON = {"/teleop/command", "/saliency", "/sim/ground_truth"}
-
-
-def smc(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "smccli.cli", *args], capture_output=True, text=True, timeout=timeout
-    )
 
 
 @pytest.fixture(scope="module")
@@ -110,7 +103,7 @@ def test_same_script_and_seed_give_the_same_bytes(tmp_path):
                 reproducible=True,
             )
         )
-        digests.append(hashlib.sha256((tmp_path / name).read_bytes()).hexdigest())
+        digests.append(sha256(tmp_path / name))
     assert digests[0] == digests[1]
 
 
