@@ -56,15 +56,15 @@ test-fast: setup
 	$(PY) -m pytest -q -m "not slow"
 
 demo: setup
-	$(PY) -m smccli.demo
+	$(PY) -m smccli.bench.demo
 
 sample-logs: setup
-	$(PY) -m smccli.sample_logs
+	$(PY) -m smccli.bench.sample_logs
 
 bench: setup
-	$(PY) -m smccli.bench_record
-	$(PY) -m smccli.bench_compile
-	$(PY) -m smccli.bench
+	$(PY) -m smccli.bench.record
+	$(PY) -m smccli.bench.compile
+	$(PY) -m smccli.bench.paper
 
 lint: setup
 	$(VENV)/bin/ruff check smccli tests

@@ -9,7 +9,7 @@ import os
 import sys
 from enum import Enum
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.console import Console
@@ -18,6 +18,10 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from smccli.errors import SmcError
+
+if TYPE_CHECKING:
+    from smccli.execute.episode import EpisodeResult
+    from smccli.learn.tree import Tree as LearnedTree
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -46,18 +50,33 @@ class SegmentChoice(str, Enum):
 @app.command()
 def scenes() -> None:
     """List the built-in scenes and their objects."""
-    from smccli.scene import list_scenes
+    from smccli.world.scene import list_scenes
 
-    table = Table("scene", "objects", "variants", "sensors", "task")
+    table = Table("scene", "robot", "objects", "variants", "sensors", "task")
     for s in list_scenes():
         sensors = [f"camera {s.camera.width}x{s.camera.height} @ {s.camera.rate:g} Hz"]
         if s.scale:
             sensors.append(f"scale ({s.scale})")
         variants = "; ".join(f"{v}: {', '.join(o)}" for v, o in s.variants) or "-"
         objects = ", ".join(o.name for o in s.objects)
-        table.add_row(
-            *(escape(x) for x in (s.name, objects, variants, ", ".join(sensors), s.description))
-        )
+        row = (s.name, s.robot.name, objects, variants, ", ".join(sensors), s.description)
+        table.add_row(*(escape(x) for x in row))
+    out.print(table)
+
+
+@app.command()
+def robots() -> None:
+    """List the built-in robots: degrees of freedom, gripper, sensors."""
+    from smccli.world.robot import list_robots
+
+    table = Table("robot", "DoF", "gripper", "sensors", "description")
+    for r in list_robots():
+        g = r.gripper
+        gripper = f"{len(g.joints)} fingers, {g.closed:g}-{g.open:g} per finger ({g.actuator})"
+        mounted = [f"{s.type} {s.name}" for s in r.sensors]
+        sensors = ", ".join(["joint encoders", *mounted])
+        dof = f"{r.dof}" + (" (base 3)" if r.base else "")
+        table.add_row(*(escape(x) for x in (r.name, dof, gripper, sensors, r.description)))
     out.print(table)
 
 
@@ -82,8 +101,8 @@ def record(
     realtime: Annotated[bool, typer.Option(help="Pace the script operator at real time.")] = False,
 ) -> None:
     """Record a demonstration into an MCAP log."""
-    from smccli.record import RecordConfig
-    from smccli.record import record as run_record
+    from smccli.record.session import RecordConfig
+    from smccli.record.session import record as run_record
 
     cfg = RecordConfig(
         scene=scene,
@@ -160,9 +179,8 @@ def compile_cmd(
     ] = None,
 ) -> None:
     """Segment logs, extract SMCs and merge them into a versioned tree.json."""
-    from smccli.compile import compile_logs
-    from smccli.segmentation import SegmentMode
-    from smccli.tree_view import print_tree
+    from smccli.learn.compile import compile_logs
+    from smccli.learn.segmentation import SegmentMode
 
     with Progress(
         TextColumn("[bold]compiling[/]"),
@@ -199,7 +217,92 @@ def compile_cmd(
         f"[bold green]{output}[/]: {state}, {len(result.tree.nodes)} nodes, "
         f"{len(result.tree.edges)} edges"
     )
-    print_tree(result.tree, out)
+    _print_tree(result.tree)
+
+
+def _print_tree(tree: LearnedTree) -> None:
+    """Nodes and edges as an indented tree, one line per SMC."""
+    from rich.tree import Tree as RichTree
+
+    from smccli.inspect.tree_text import describe_action, describe_perception
+    from smccli.learn.tree import ROOT
+
+    root = RichTree(f"[bold]{ROOT}[/] (root)")
+    stack = [(ROOT, root)]
+    while stack:
+        node, branch = stack.pop()
+        added = []
+        for e in tree.children(node):
+            srcs = escape(", ".join(f"{s.log}@{s.t0:.1f}-{s.t1:.1f}s" for s in e.sources))
+            what = describe_perception(e.smc, tree.params.perception)
+            child = branch.add(
+                f"[cyan]{e.id}[/] -> [bold]{e.child}[/]  {what}  ||  "
+                f"{describe_action(e.smc)}  [dim]support {e.support}: {srcs}[/]"
+            )
+            added.append((e.child, child))
+        stack.extend(reversed(added))
+    out.print(root)
+
+
+def _print_episode(result: EpisodeResult) -> None:
+    """Outcome, one row per decision (frontier, choice, D_P of each candidate, goal,
+    latency), then the task and wall times."""
+    colour = "green" if result.success else "red"
+    if result.note:
+        out.print(f"note: {escape(result.note)}", highlight=False)
+    out.print(f"[bold {colour}]{result.outcome}[/]: {escape(result.reason)}", highlight=False)
+    table = Table("node", "chosen", "candidates (d_p, * = contingent)", "goal", "latency [ms]")
+    for d in result.decisions:
+        cands = ", ".join(
+            f"{c.edge} {c.d_p:.3f}{'*' if c.contingent else ''}" for c in d.candidates
+        )
+        goal = (
+            ""
+            if d.mapped_goal is None
+            else "[" + ", ".join(f"{v:.3f}" for v in d.mapped_goal) + "]"
+        )
+        table.add_row("/".join(d.nodes), d.chosen or "-", cands, goal, f"{1e3 * d.latency_s:.1f}")
+    out.print(table)
+    ratio = result.duration / result.demo_duration if result.demo_duration else float("nan")
+    out.print(
+        f"task {result.duration:.2f} s (demonstration {result.demo_duration:.2f} s, "
+        f"x{ratio:.2f}); wall {result.wall_time:.2f} s"
+        + (f"; log {result.output}" if result.output else "")
+    )
+
+
+def _print_campaign(summary: dict[str, Any]) -> None:
+    """Success rate with its interval, success by distance band, failures, latency, duration."""
+    lo, hi = summary["ci95"]
+    if summary.get("note"):
+        out.print(f"note: {escape(summary['note'])}", highlight=False)
+    out.print(
+        f"[bold]{summary['scene']}[/]: {summary['successes']}/{summary['trials']} "
+        f"succeeded = {100 * summary['success_rate']:.1f} % "
+        f"(95 % CI {100 * lo:.1f}-{100 * hi:.1f} %)",
+        highlight=False,
+    )
+    table = Table("distance from demo", "trials", "success [%]", "95 % CI")
+    for b in summary["by_band"]:
+        rate = "-" if b["success_rate"] is None else f"{100 * b['success_rate']:.1f}"
+        table.add_row(
+            b["label"], str(b["trials"]), rate, f"{100 * b['ci95'][0]:.0f}-{100 * b['ci95'][1]:.0f}"
+        )
+    out.print(table)
+    fails = ", ".join(f"{k} {v}" for k, v in summary["failures"].items() if v) or "none"
+    out.print(f"failures: {fails}")
+    lat, dur = summary["latency_ms"], summary["duration_s"]
+    if lat["p50"] is not None:
+        out.print(
+            f"decision latency p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} ms "
+            f"(match p50 {lat['match_p50']:.3f} ms)"
+        )
+    if dur["p50"] is not None:
+        out.print(
+            f"task duration p50 {dur['p50']:.2f} s (demonstration {dur['demo']:.2f} s,"
+            f" ratio p50 {dur['ratio_p50']:.2f}); {summary['trials_per_second']:.2f} "
+            "trials/s"
+        )
 
 
 @app.command()
@@ -227,7 +330,7 @@ def replay(
     force: Annotated[bool, typer.Option(help="Overwrite existing outputs.")] = False,
 ) -> None:
     """Execute the tree autonomously in simulation: one episode or a campaign."""
-    from smccli import replay as rp
+    from smccli.execute import run_campaign, run_episode
 
     if trials > 0:
         with Progress(
@@ -244,7 +347,7 @@ def replay(
             def on_trial(done: int, successes: int) -> None:
                 progress.update(task, completed=done, description=f"{successes}/{done} succeeded")
 
-            summary = rp.run_campaign(
+            summary = run_campaign(
                 tree,
                 scene=scene,
                 trials=trials,
@@ -254,17 +357,17 @@ def replay(
                 force=force,
                 on_trial=on_trial,
             )
-        rp.print_campaign(summary, out)
+        _print_campaign(summary)
         if min_success is not None and summary["success_rate"] < min_success:
             err.print(
                 f"success rate {summary['success_rate']:.3f} below --min-success {min_success}"
             )
             raise typer.Exit(1)
         return
-    result = rp.run_episode(
+    result = run_episode(
         tree, scene=scene, seed=seed, layout=layout, output=output, report=report, force=force
     )
-    rp.print_episode(result, out)
+    _print_episode(result)
     if result.outcome != "success":
         raise typer.Exit(1)
 
@@ -280,13 +383,13 @@ def inspect(
     force: Annotated[bool, typer.Option(help="Overwrite an existing --save file.")] = False,
 ) -> None:
     """Show the tree and the traces in Rerun."""
-    from smccli import inspect as ins
+    from smccli.inspect import recording as ins
 
     if sum([save is not None, spawn, serve]) > 1:
         raise SmcError("choose one of --save, --spawn, --serve")
     if not (spawn or serve) and save is None:
         save = tree.with_suffix(".rrd")
-    ins.inspect(
+    result = ins.inspect(
         tree,
         logs or [],
         save=save,
@@ -294,9 +397,15 @@ def inspect(
         serve=serve,
         port=port,
         force=force,
-        console=out,
         on_warning=lambda m: err.print(f"[yellow]warning:[/] {escape(m)}"),
+        on_message=lambda m: out.print(escape(m), highlight=False, soft_wrap=True),
     )
+    if result.rrd is not None:
+        out.print(
+            f"[bold green]wrote[/] {escape(str(result.rrd))}  ({len(result.recordings)} "
+            f"recording(s): {', '.join(result.recordings)}; open with `rerun {result.rrd}`)",
+            highlight=False,
+        )
 
 
 @app.command()
@@ -311,7 +420,7 @@ def doctor(
     force: Annotated[bool, typer.Option(help="Overwrite the --repair output.")] = False,
 ) -> None:
     """Check logs before compiling: exit 0 healthy, 1 warnings, 2 a log compile would reject."""
-    from smccli.logs import doctor as dr
+    from smccli.learn import doctor as dr
 
     if repair is not None and len(logs) != 1:
         raise SmcError(f"--repair takes exactly one LOG, got {len(logs)}")

@@ -59,7 +59,7 @@ def sample_logs() -> dict[str, list[Path]]:
 @pytest.fixture(scope="session")
 def sample_trees(tmp_path_factory, sample_logs) -> dict[str, Path]:
     """Each scene's sample demos compiled into a tree."""
-    from smccli.compile import compile_logs
+    from smccli.learn.compile import compile_logs
 
     root = tmp_path_factory.mktemp("trees")
     out = {}
@@ -74,7 +74,7 @@ def sample_trees(tmp_path_factory, sample_logs) -> dict[str, Path]:
 def reseeded_logs(tmp_path_factory) -> dict[int, dict[str, list[Path]]]:
     """The sample scripts recorded again with seeds 1 and 2 (tremor, hesitation, speed),
     each from its own random layout, as users record them (``--randomize``)."""
-    from smccli.record import RecordConfig, record
+    from smccli.record.session import RecordConfig, record
 
     root = tmp_path_factory.mktemp("reseeded")
     out: dict[int, dict[str, list[Path]]] = {}

@@ -21,7 +21,7 @@ DEMOS = {
 
 def record_demo(scene: str, name: str, out: Path, seed: int = 0) -> Path:
     """Record ``sample_logs/<scene>/<name>.yaml`` into ``out`` (once)."""
-    from smccli.record import RecordConfig, record
+    from smccli.record.session import RecordConfig, record
 
     if not out.exists():
         record(
@@ -36,7 +36,7 @@ def build(
     root: Path, scene: str, names: list[str] | None = None, *, tag: str = ""
 ) -> tuple[list[Path], Path]:
     """Record the scene's demos (or ``names``) under ``root`` and compile them; cached."""
-    from smccli.compile import compile_logs
+    from smccli.learn.compile import compile_logs
 
     names = names or DEMOS[scene]
     root.mkdir(parents=True, exist_ok=True)

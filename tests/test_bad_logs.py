@@ -27,7 +27,7 @@ from smccli.errors import LogError
 from smccli.logs import log_summary, read_log
 from smccli.logs import topics as tp
 from smccli.logs.reader import _Raw, _read_bytes, _scan
-from smccli.robot_model import RobotModel
+from smccli.logs.robot import robot_model_of
 
 REPO = Path(__file__).resolve().parent.parent
 SAMPLE = REPO / "sample_logs" / "pick_place" / "demo1.mcap"
@@ -329,7 +329,7 @@ BY_NAME = {c.name: c for c in CASES}
 @pytest.fixture(scope="module")
 def good_tree(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The sample log compiled once; each test works on a copy."""
-    from smccli.compile import compile_logs
+    from smccli.learn.compile import compile_logs
 
     path = tmp_path_factory.mktemp("tree") / "tree.json"
     compile_logs([SAMPLE], path)
@@ -342,7 +342,7 @@ def test_read_log_raises_one_line_naming_file_and_place(case: Case, tmp_path: Pa
     if not case.read_log_fails:
         log = read_log(path, on_warning=lambda m: None)
         with pytest.raises(LogError) as exc:
-            RobotModel.from_log(log)
+            robot_model_of(log)
     else:
         with pytest.raises(LogError) as exc:
             read_log(path, on_warning=lambda m: None)
@@ -420,12 +420,14 @@ def test_user_topics_with_channels_are_still_ignored(tmp_path: Path) -> None:
 
 
 def test_scene_from_attachments_names_log_and_attachment() -> None:
-    from smccli.scene import load_scene_from_text
+    from smccli.world.scene import load_scene_from_text
 
     atts = {a.name: a.data.decode() for a in sample_raw().attachments}
     scene = load_scene_from_text(atts["scene.yaml"], atts["scene.xml"], log="demo1.mcap")
     assert scene.name == "pick_place"
-    with pytest.raises(LogError, match=r"^demo1.mcap: attachment scene.xml: does not compile"):
+    with pytest.raises(
+        LogError, match=r"^demo1.mcap: attachment scene.xml: MuJoCo rejects the MJCF"
+    ):
         load_scene_from_text(atts["scene.yaml"], REJECTED_MJCF.decode(), log="demo1.mcap")
     with pytest.raises(LogError, match=r"^demo1.mcap: attachment scene.yaml: not valid YAML"):
         load_scene_from_text("name: [", atts["scene.xml"], log="demo1.mcap")
@@ -436,4 +438,4 @@ def test_robot_model_names_a_joint_the_mjcf_lacks() -> None:
     js = log.joint_states[0]
     renamed = dataclasses.replace(js, names=("elbow_of_another_robot", *js.names[1:]))
     with pytest.raises(LogError, match=r"attachment scene.xml: no joint 'elbow_of_another_robot'"):
-        RobotModel.from_log(dataclasses.replace(log, joint_states=[renamed]))
+        robot_model_of(dataclasses.replace(log, joint_states=[renamed]))

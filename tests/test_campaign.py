@@ -14,8 +14,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from replay_fixtures import REPO, build, cache_root  # noqa: E402
 
-from smccli import campaign as cp  # noqa: E402
-from smccli.replay import resolve  # noqa: E402
+from smccli.execute import campaign as cp  # noqa: E402
+from smccli.execute.episode import resolve  # noqa: E402
 
 PY = str(REPO / ".venv" / "bin" / "python")
 KEYS = {"trials", "successes", "success_rate", "ci95", "by_band", "failures", "latency_ms"}

@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from smccli.compile import compile_logs
 from smccli.errors import LogError, TreeError
+from smccli.learn.compile import compile_logs
+from smccli.learn.segmentation import SegmentMode
+from smccli.learn.tree import ROOT, Tree, load_tree
 from smccli.logs import read_log, strip_topic
-from smccli.segmentation import SegmentMode
-from smccli.tree import ROOT, Tree, load_tree
 
 
 def shape(tree: Tree) -> list:

@@ -8,30 +8,39 @@ import mujoco
 import numpy as np
 import pytest
 
-from smccli.controller import HOME, CartesianController, reachable, rotation_error, wrap
-from smccli.scene import load_scene
-from smccli.sensors import PoiCommand
-from smccli.sim import Sim
+from smccli.world.controller import CartesianController, reachable, rotation_error, wrap
+from smccli.world.scene import Scene, load_scene
+from smccli.world.sensors import PoiCommand
+from smccli.world.sim import Sim
+
+# Every built-in robot: the controller knows only what its robot file says.
+SCENES = ("pick_place", "bench_pick_panda")
+
+
+@pytest.fixture(scope="module", params=SCENES)
+def scene(request: pytest.FixtureRequest) -> Scene:
+    return load_scene(request.param)
 
 
 @pytest.fixture(scope="module")
-def model() -> mujoco.MjModel:
-    return load_scene("pick_place").model()
+def model(scene: Scene) -> mujoco.MjModel:
+    return scene.model()
 
 
-def test_site_jacobian_matches_finite_differences(model: mujoco.MjModel) -> None:
-    ctl = CartesianController(model)
+def test_site_jacobian_matches_finite_differences(scene: Scene, model: mujoco.MjModel) -> None:
+    ctl = CartesianController(model, scene.robot)
+    n = len(scene.robot.arm_joints)
     rng = np.random.default_rng(0)
     eps = 1e-6
     for _ in range(5):
-        q = HOME + rng.uniform(-0.5, 0.5, 7)
+        q = ctl.home + rng.uniform(-0.5, 0.5, n)
         ctl._set(q)
         jacp, jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
         mujoco.mj_jacSite(model, ctl.data, jacp, jacr, ctl.site_id)
         p0 = ctl.data.site_xpos[ctl.site_id].copy()
         R0 = ctl.data.site_xmat[ctl.site_id].reshape(3, 3).copy()
-        for k in range(7):
-            dq = np.zeros(7)
+        for k in range(n):
+            dq = np.zeros(n)
             dq[k] = eps
             ctl._set(q + dq)
             dp = (ctl.data.site_xpos[ctl.site_id] - p0) / eps
@@ -40,9 +49,9 @@ def test_site_jacobian_matches_finite_differences(model: mujoco.MjModel) -> None
             np.testing.assert_allclose(dr, jacr[:, ctl.dofadr[k]], atol=1e-5)
 
 
-def test_tracking_is_accurate_over_workspace_and_yaws() -> None:
+def test_tracking_is_accurate_over_workspace_and_yaws(scene: Scene) -> None:
     """Steady state within 5 mm and 2 degrees, targets spread over the work area, any yaw."""
-    sim = Sim(load_scene("pick_place"))
+    sim = Sim(scene)
     rng = np.random.default_rng(1)
     for _ in range(12):
         target = np.array(
@@ -62,16 +71,17 @@ def test_tracking_is_accurate_over_workspace_and_yaws() -> None:
         assert R[2, 2] < -math.cos(math.radians(2))  # pointing down
 
 
-def test_unreachable_targets_are_refused(model: mujoco.MjModel) -> None:
-    assert reachable(model, np.array([0.45, 0.0, 0.1, 0.0]))
-    assert not reachable(model, np.array([1.3, 0.0, 0.1, 0.0]))  # too far
-    assert not reachable(model, np.array([0.45, 0.0, -0.05, 0.0]))  # into the table
-    assert not reachable(model, np.array([0.45, 0.0, 1.5, 0.0]))  # too high
-    assert not reachable(model, np.array([np.nan, 0.0, 0.1, 0.0]))
+def test_unreachable_targets_are_refused(scene: Scene, model: mujoco.MjModel) -> None:
+    robot = scene.robot
+    assert reachable(model, robot, np.array([0.45, 0.0, 0.1, 0.0]))
+    assert not reachable(model, robot, np.array([1.3, 0.0, 0.1, 0.0]))  # too far
+    assert not reachable(model, robot, np.array([0.45, 0.0, -0.05, 0.0]))  # into the table
+    assert not reachable(model, robot, np.array([0.45, 0.0, 1.5, 0.0]))  # too high
+    assert not reachable(model, robot, np.array([np.nan, 0.0, 0.1, 0.0]))
 
 
-def test_joint_speed_is_capped(model: mujoco.MjModel) -> None:
-    ctl = CartesianController(model, max_joint_speed=1.0)
+def test_joint_speed_is_capped(scene: Scene, model: mujoco.MjModel) -> None:
+    ctl = CartesianController(model, scene.robot, max_joint_speed=1.0)
     q0 = ctl.q.copy()
     q1 = ctl.update(np.array([0.4, 0.4, 0.05, 2.0]))  # far jump
     assert np.max(np.abs(q1 - q0)) <= 0.01 + 1e-9

@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from smccli.dmp import Dmp, DmpParams, fit, from_dict, merge, rollout, shape_distance, to_dict
 from smccli.errors import LogError, TreeError
+from smccli.learn.dmp import Dmp, DmpParams, fit, from_dict, merge, rollout, shape_distance, to_dict
 
 START = np.array([0.40, -0.20, 0.10, 0.3])
 GOAL = np.array([0.60, 0.15, 0.10, 1.2])
@@ -91,7 +91,7 @@ def test_rollout_reaches_moved_goal(direction, dyaw):
 def _plain_dmp_miss(t, y, goal):
     """Goal miss [m] of the textbook form tau^2 y'' = K(g - y) - D tau y' + x f(x) (world frame).
 
-    Kept here as the measured reason for smccli.dmp's formulation (docs/dmp.md).
+    Kept here as the measured reason for smccli.learn.dmp's formulation (docs/dmp.md).
     """
     p = DmpParams()
     s = (t - t[0]) / (t[-1] - t[0])

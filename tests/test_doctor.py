@@ -19,9 +19,9 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Message
 from mcap.stream_reader import StreamReader
 
+from smccli.learn.doctor import copy_log, diagnose, exit_code, repair
 from smccli.logs import log_summary, strip_topic
 from smccli.logs import topics as tp
-from smccli.logs.doctor import copy_log, diagnose, exit_code, repair
 from smccli.logs.reader import _Raw, _read_bytes, _scan
 
 DEMO = SAMPLE_LOGS / "pick_place" / "demo1.mcap"

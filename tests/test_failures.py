@@ -9,9 +9,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from smccli.replay import layout_for, run_episode
-from smccli.scene import load_scene
-from smccli.tree import ROOT, Tree, load_tree
+from smccli.execute.episode import layout_for, run_episode
+from smccli.learn.tree import ROOT, Tree, load_tree
+from smccli.world.scene import load_scene
 
 
 def _shift_goal(tree: Tree, edge_id: str, delta: tuple[float, float, float]) -> Tree:

@@ -25,11 +25,11 @@ from hypothesis import strategies as st
 from mcap.writer import CompressionType, Writer
 
 from smccli.errors import SmcError
+from smccli.learn.tree import load_tree, tree_from_dict
 from smccli.logs import LogWriter, log_summary, read_log
 from smccli.logs import topics as tp
 from smccli.logs.reader import _FAST_OK, _Raw, _scan
-from smccli.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
-from smccli.tree import load_tree, tree_from_dict
+from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
 # numpy's overflow and invalid-value warnings mean garbage got through unnoticed.
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
@@ -260,7 +260,7 @@ def test_hand_checks_accept_only_what_the_schema_accepts(obj: Any) -> None:
 @functools.cache
 def tree_doc() -> dict[str, Any]:
     """A real tree (the sample log compiled) as its JSON document."""
-    from smccli.compile import compile_logs
+    from smccli.learn.compile import compile_logs
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "tree.json"

@@ -27,9 +27,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from rerun.chunk import RrdReader  # noqa: E402
 
 from smccli.errors import LogError, SmcError, TreeError  # noqa: E402
-from smccli.inspect import branch_colours, colour_name, dominant_rgb, inspect  # noqa: E402
+from smccli.inspect.recording import branch_colours, colour_name, dominant_rgb, inspect  # noqa: E402
+from smccli.learn.tree import load_tree  # noqa: E402
 from smccli.logs import read_log  # noqa: E402
-from smccli.tree import load_tree  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 SAMPLES = Path(os.environ.get("SMC_SAMPLE_LOGS", REPO / "sample_logs"))
@@ -54,10 +54,10 @@ def _simulated_demo(path: Path, *, decisions: bool) -> None:
     synthetic scale reading; with ``decisions`` two /smc/decision records (a replay)."""
     from smccli.logs import LogWriter
     from smccli.logs import topics as tp
-    from smccli.record import scene_attachments
-    from smccli.scene import load_scene, nominal_layout
-    from smccli.sensors import PoiCommand, SaliencyMark
-    from smccli.sim import Sim
+    from smccli.logs.writer import scene_attachments
+    from smccli.world.scene import load_scene, nominal_layout
+    from smccli.world.sensors import PoiCommand, SaliencyMark
+    from smccli.world.sim import Sim
 
     scene = load_scene("pick_place")
     layout = nominal_layout(scene, scene.variants[0][0] if scene.variants else None)
@@ -108,12 +108,12 @@ def _simulated_demo(path: Path, *, decisions: bool) -> None:
 
 def _hand_made_tree(log_path: Path, out: Path) -> None:
     """Two SMCs fitted on the demo's command path (approach, grasp), the cube as cluster."""
-    from smccli import dmp
-    from smccli.params import SmcParams
+    from smccli.learn import dmp
+    from smccli.learn.params import SmcParams
+    from smccli.learn.smc import Action, SalientPerceptions, Smc, Source, goal_in_object
+    from smccli.learn.tree import Tree, insert_chain, save_tree
     from smccli.perception import Cluster
     from smccli.perception.histogram import histogram_size
-    from smccli.smc import Action, SalientPerceptions, Smc, Source, goal_in_object
-    from smccli.tree import Tree, insert_chain, save_tree
 
     log = read_log(log_path)
     params = SmcParams()
@@ -152,8 +152,8 @@ def inputs(tmp_path_factory) -> Inputs:
     root = tmp_path_factory.mktemp("inspect")
     demos = sorted((SAMPLES / "pick_place").glob("*.mcap"))
     if len(demos) >= 2:
-        from smccli.compile import compile_logs
-        from smccli.replay import run_episode
+        from smccli.execute import run_episode
+        from smccli.learn.compile import compile_logs
 
         tree = root / "pick_place.json"
         compile_logs(demos, tree)
@@ -458,7 +458,7 @@ def test_library_errors_are_typed(inputs, tmp_path):
 
 
 def test_previews_render_headless(inputs, tmp_path):
-    from smccli.inspect import save_previews
+    from smccli.inspect.recording import save_previews
 
     files = save_previews(load_tree(inputs.tree), read_log(inputs.demos[0]), tmp_path)
     assert [f.name for f in files] == ["tree.png", "world.png", "camera.png", "signals.png"]

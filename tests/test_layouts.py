@@ -12,11 +12,11 @@ import pytest
 from conftest import SAMPLE_LOGS
 from test_compile import BENCH_PICK, PICK_PLACE, WEIGH_SORT, check_weigh_sort, shape
 
-from smccli import campaign as cp
-from smccli.compile import compile_logs
+from smccli.execute import campaign as cp
+from smccli.learn.compile import compile_logs
+from smccli.learn.tree import ROOT, Tree, load_tree
 from smccli.logs import read_log
-from smccli.record import RecordConfig, record
-from smccli.tree import ROOT, Tree, load_tree
+from smccli.record.session import RecordConfig, record
 
 pytestmark = pytest.mark.slow
 

@@ -21,7 +21,7 @@ import smccli
 from smccli.errors import LogError, OutputExistsError
 from smccli.logs import LogWriter, log_summary, part_path, read_log, strip_topic
 from smccli.logs import topics as tp
-from smccli.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
+from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
 REPO = Path(smccli.__file__).resolve().parent.parent
 H, W = 240, 320
@@ -291,7 +291,7 @@ CHILD = textwrap.dedent(
     import sys, time
     import numpy as np
     from smccli.logs import LogWriter
-    from smccli.sensors import PoiCommand
+    from smccli.world.sensors import PoiCommand
     w = LogWriter(sys.argv[1], metadata={"scene": "crash"}, flush_period_s=1.0)
     t0 = time.monotonic()
     k = 0

@@ -11,7 +11,7 @@ import yaml
 from test_scene import fields_without_description
 
 from smccli.errors import ScriptError
-from smccli.operators import (
+from smccli.record.operators import (
     ScriptOperator,
     load_script,
     minimum_jerk,
@@ -19,9 +19,9 @@ from smccli.operators import (
     run_script,
     script_layout,
 )
-from smccli.scene import load_scene
 from smccli.schemas import load_schema
-from smccli.sim import Sim
+from smccli.world.scene import load_scene
+from smccli.world.sim import Sim
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = sorted((ROOT / "sample_logs").glob("*/*.yaml"))
@@ -37,7 +37,7 @@ EXPECTED_MARKS = {
 def test_sample_scripts_are_schema_valid() -> None:
     schema = load_schema("teleop_script")
     jsonschema.Draft202012Validator.check_schema(schema)
-    assert len(SAMPLES) == 5
+    assert len(SAMPLES) == 6
     for path in SAMPLES:
         jsonschema.validate(yaml.safe_load(path.read_text()), schema)
         assert load_script(path).steps

@@ -50,9 +50,9 @@ from smccli.perception import (  # noqa: E402
 )
 from smccli.perception.cloud import object_points  # noqa: E402
 from smccli.perception.clusters import cut_points, describe_cluster  # noqa: E402
-from smccli.scene import SCENES_DIR, load_scene  # noqa: E402
 from smccli.schemas import parse_yaml, schema_problem  # noqa: E402
-from smccli.sensors import CameraFrame  # noqa: E402
+from smccli.world.scene import SCENES_DIR, load_scene  # noqa: E402
+from smccli.world.sensors import CameraFrame  # noqa: E402
 
 _SCENE_PARAMS = PerceptionParams(**CROP)
 
@@ -311,7 +311,6 @@ def test_mug_mass_is_shared_by_volume_and_its_handle_is_below_the_rim(scene):
 
 def test_mug_without_a_handle_is_refused(tmp_path):
     shutil.copytree(SCENES_DIR / "pick_place", tmp_path / "mine")
-    shutil.copytree(SCENES_DIR / "robots", tmp_path / "robots")
     path = tmp_path / "mine" / "scene.yaml"
     text = path.read_text()
     path.write_text(text.replace("shape: cylinder", "shape: mug", 1))  # size x = y

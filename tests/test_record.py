@@ -12,10 +12,10 @@ import pytest
 from conftest import SAMPLE_LOGS, sha256, smc
 from mcap.reader import make_reader
 
-from smccli.compile import compile_logs
 from smccli.errors import OutputExistsError
+from smccli.learn.compile import compile_logs
 from smccli.logs import read_log
-from smccli.record import RecordConfig, record
+from smccli.record.session import RecordConfig, record
 
 SCRIPT = SAMPLE_LOGS / "pick_place" / "demo1.yaml"
 PROTO = {

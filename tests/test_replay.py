@@ -16,10 +16,17 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from replay_fixtures import REPO, build, cache_root  # noqa: E402
 
-from smccli import replay as rp  # noqa: E402
-from smccli.contingency import match_context  # noqa: E402
+from smccli.execute.episode import (  # noqa: E402
+    EpisodeResult,
+    episode,
+    layout_for,
+    resolve,
+    run_episode,
+)
+from smccli.execute.executor import EdgeStack, equivalent, match_edges  # noqa: E402
+from smccli.learn.contingency import match_context  # noqa: E402
 from smccli.logs import read_log, strip_topic  # noqa: E402
-from smccli.sim import Sim  # noqa: E402
+from smccli.world.sim import Sim  # noqa: E402
 
 PY = str(REPO / ".venv" / "bin" / "python")
 
@@ -46,7 +53,7 @@ def cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     )
 
 
-def decisions_of(result: rp.EpisodeResult) -> list[tuple]:
+def decisions_of(result: EpisodeResult) -> list[tuple]:
     return [
         (
             d.nodes,
@@ -61,7 +68,7 @@ def decisions_of(result: rp.EpisodeResult) -> list[tuple]:
 def test_episode_on_a_new_layout_succeeds_and_logs_decisions(bench, tmp_path):
     _, tree = bench
     out, report = tmp_path / "replay.mcap", tmp_path / "report.json"
-    result = rp.run_episode(tree, seed=7, output=out, report=report)
+    result = run_episode(tree, seed=7, output=out, report=report)
     assert result.outcome == "success", result.reason
     assert result.success and result.path == ("e1", "e2")
     log = read_log(out)
@@ -76,7 +83,7 @@ def test_episode_on_a_new_layout_succeeds_and_logs_decisions(bench, tmp_path):
     assert len(doc["latency_ms"]["per_decision"]) == 2
     assert doc["demo_duration_s"] == pytest.approx(result.demo_duration) and doc["duration_s"] > 0
     # The mapped grasp goal sits on the white box where it really is (evaluation only).
-    box = rp.layout_for(rp.resolve(tree, None)[1], 7)["white_box"]
+    box = layout_for(resolve(tree, None)[1], 7)["white_box"]
     assert np.hypot(*(np.array(first["mapped_goal"][:2]) - box[:2])) < 0.01
 
 
@@ -85,15 +92,15 @@ def test_vectorised_match_equals_match_context(tmp_path_factory, bench):
 
     _, tree_path = build(cache_root(tmp_path_factory), "pick_place")
     for path in (tree_path, bench[1]):
-        tree, scene = rp.resolve(path, None)
-        sim = Sim(scene, rp.layout_for(scene, 3))
+        tree, scene = resolve(path, None)
+        sim = Sim(scene, layout_for(scene, 3))
         frame = sim.render_camera()
         clusters = clusters_from_frame(frame, sim.robot_geometry(), tree.params.perception)
         sim.close()
         for weight in (None, 0.0, 0.3):
             edges = [e for e in tree.edges if (e.smc.perception.weight is None) == (weight is None)]
-            stack = rp.EdgeStack.build(edges)
-            d, idx = rp.match_edges(stack, clusters, weight, tree.params)
+            stack = EdgeStack.build(edges)
+            d, idx = match_edges(stack, clusters, weight, tree.params)
             for i, e in enumerate(edges):
                 m = match_context(e.smc.perception, clusters, weight, tree.params)
                 assert d[i] == pytest.approx(m.d_p, abs=1e-9)
@@ -105,7 +112,7 @@ def test_no_contingent_smc_lists_distances_and_exits_1(pick_demo1, tmp_path):
     layout = tmp_path / "no_cube.yaml"
     # The cube is off the table (out of the camera's crop); the pyramid looks different.
     layout.write_text("orange_cube: [0.2, -1.6, 0.025, 0.0]\n")
-    result = rp.run_episode(tree, layout=layout)
+    result = run_episode(tree, layout=layout)
     assert result.outcome == "no_contingent_smc" and not result.success
     (dec,) = result.decisions
     assert dec.chosen is None and dec.candidates and not dec.candidates[0].contingent
@@ -127,7 +134,7 @@ def test_bad_tree_files_give_one_line_and_exit_2(bench, tmp_path):
         (str(tmp_path / "missing.json"), []),
         (str(corrupt), []),
         (str(other_version), []),
-        (str(tree), ["--scene", "pick_place"]),  # built for bench_pick
+        (str(tree), ["--scene", "bench_pick_panda"]),  # taught on the arm
     ]
     for path, extra in cases:
         proc = cli(path, *extra)
@@ -139,33 +146,33 @@ def test_bad_tree_files_give_one_line_and_exit_2(bench, tmp_path):
 
 def test_control_never_reads_object_state(bench, monkeypatch):
     _, tree_path = bench
-    tree, scene = rp.resolve(tree_path, None)
-    layout = rp.layout_for(scene, 11)
-    reference = rp.episode(tree, scene, layout)
+    tree, scene = resolve(tree_path, None)
+    layout = layout_for(scene, 11)
+    reference = episode(tree, scene, layout)
 
     def forbidden(*_a, **_k):
         raise AssertionError("object state read during control")
 
     for name in ("ground_truth", "object_pose", "object_speed", "holds", "success"):
         monkeypatch.setattr(Sim, name, forbidden)
-    honest = rp.episode(tree, scene, layout, evaluate=lambda sim: monkeypatch.undo())
+    honest = episode(tree, scene, layout, evaluate=lambda sim: monkeypatch.undo())
     assert honest.outcome == reference.outcome == "success"
     assert decisions_of(honest) == decisions_of(reference)
 
 
 def test_same_decisions_without_the_ground_truth_topic(bench, tmp_path):
-    from smccli.compile import compile_logs
+    from smccli.learn.compile import compile_logs
 
     (log,), tree_path = bench
     stripped = strip_topic(log, tmp_path / "stripped.mcap", "/sim/ground_truth")
     assert "/sim/ground_truth" not in read_log(stripped).topic_counts
     tree2 = tmp_path / "tree2.json"
     compile_logs([stripped], tree2)
-    tree, scene = rp.resolve(tree_path, None)
-    other, _ = rp.resolve(tree2, None)
-    layout = rp.layout_for(scene, 5)
-    a = rp.episode(tree, scene, layout)
-    b = rp.episode(other, scene, layout)
+    tree, scene = resolve(tree_path, None)
+    other, _ = resolve(tree2, None)
+    layout = layout_for(scene, 5)
+    a = episode(tree, scene, layout)
+    b = episode(other, scene, layout)
     assert a.outcome == b.outcome == "success"
     assert decisions_of(a) == decisions_of(b)
 
@@ -173,10 +180,10 @@ def test_same_decisions_without_the_ground_truth_topic(bench, tmp_path):
 def test_frontier_keeps_branches_that_differ_only_by_their_path(bench):
     import dataclasses
 
-    from smccli.tree import insert_chain
+    from smccli.learn.tree import insert_chain
 
     _, tree_path = bench
-    tree, scene = rp.resolve(tree_path, None)
+    tree, scene = resolve(tree_path, None)
     edges = tree.edges
     # The same demonstration with another path (forcing weights x 4) that comes to the goal
     # from the side instead of from above (approach's x and z swapped): another way of
@@ -195,8 +202,8 @@ def test_frontier_keeps_branches_that_differ_only_by_their_path(bench):
     forked = insert_chain(tree, chain, [e.sources[0] for e in edges])
     assert len(forked.children("n0")) == 2
     a, b = forked.children("n0")
-    assert rp.equivalent(a, b, forked.params)
-    result = rp.episode(forked, scene, rp.layout_for(scene, 2))
+    assert equivalent(a, b, forked.params)
+    result = episode(forked, scene, layout_for(scene, 2))
     assert result.outcome == "success", result.reason
     assert len(result.decisions[1].nodes) == 2  # both branches' decision points
     assert len(result.decisions[1].candidates) == 2

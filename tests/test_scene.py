@@ -15,9 +15,10 @@ import jsonschema
 import numpy as np
 import pytest
 
-from smccli.controller import reachable
 from smccli.errors import SceneError, SmcError
-from smccli.scene import (
+from smccli.schemas import load_schema, parse_yaml, schema_problem, validate_yaml
+from smccli.world.controller import reachable
+from smccli.world.scene import (
     RELATIONS,
     SCENES_DIR,
     SHAPES,
@@ -29,9 +30,8 @@ from smccli.scene import (
     nominal_layout,
     sample_layout,
 )
-from smccli.schemas import load_schema, parse_yaml, schema_problem, validate_yaml
 
-SCENES = ["bench_pick", "pick_place", "weigh_sort"]
+SCENES = ["bench_pick", "bench_pick_panda", "pick_place", "weigh_sort"]
 
 
 def test_builtin_scenes_load() -> None:
@@ -125,7 +125,13 @@ def test_robot_reaches_every_layout_at_any_yaw(name: str) -> None:
         for x, y in points:
             for z in (grasp_z, grasp_z + 0.15):
                 for yaw in np.linspace(-math.pi, math.pi, 8, endpoint=False):
-                    assert reachable(model, np.array([x, y, z, yaw])), (o.name, x, y, z, yaw)
+                    assert reachable(model, scene.robot, np.array([x, y, z, yaw])), (
+                        o.name,
+                        x,
+                        y,
+                        z,
+                        yaw,
+                    )
 
 
 # --- the scene file's schema ---------------------------------------------------------------
@@ -177,9 +183,8 @@ def test_builtin_scene_files_fit_the_schema(name: str) -> None:
 
 @pytest.fixture
 def user_scene(tmp_path: Path) -> Path:
-    """A copy of pick_place as a user's scene (its MJCF includes ``../robots/arm.xml``)."""
+    """A copy of pick_place as a user's scene (its robot: the built-in arm, by name)."""
     shutil.copytree(SCENES_DIR / "pick_place", tmp_path / "mine")
-    shutil.copytree(SCENES_DIR / "robots", tmp_path / "robots")
     return tmp_path / "mine" / "scene.yaml"
 
 
@@ -311,7 +316,11 @@ def test_broken_scene_file_names_key_path_and_line(user_scene: Path, case: str) 
             "sensors:\n  scale: green_cylinder\n",
             "sensors.scale (line 9): no object 'green_cylinder' of shape scale (scales: none)",
         ),
-        ("poi: poi}", "poi: hand}", "POI site 'hand' not in the MJCF"),
+        (
+            "robot: arm ",
+            "robot: arms ",
+            "robot (line 7): no robot 'arms' (built-in robots: arm, panda",
+        ),
     ],
     ids=lambda v: v if len(v) < 30 else None,
 )

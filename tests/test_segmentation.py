@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from smccli.segmentation import SegmentMode, Trace, segment
+from smccli.learn.segmentation import SegmentMode, Trace, segment
 
 DT = 0.01
 

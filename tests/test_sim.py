@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from smccli.scene import load_scene, nominal_layout
-from smccli.sensors import PoiCommand
-from smccli.sim import Sim
+from smccli.world.scene import load_scene, nominal_layout
+from smccli.world.sensors import PoiCommand
+from smccli.world.sim import Sim
 
 
 @pytest.fixture(scope="module")

@@ -11,13 +11,11 @@ import numpy as np
 import pytest
 from test_tree import _path, _smc
 
-from smccli import replay as rp
-from smccli.compile import compile_logs
-from smccli.contingency import align, d_a, merge
-from smccli.params import SmcParams
-from smccli.perception import Cluster
-from smccli.record import RecordConfig, record
-from smccli.smc import (
+from smccli.execute.episode import episode, layout_for, resolve
+from smccli.learn.compile import compile_logs
+from smccli.learn.contingency import align, d_a, merge
+from smccli.learn.params import SmcParams
+from smccli.learn.smc import (
     TWO_PI,
     SalientPerceptions,
     Smc,
@@ -25,7 +23,9 @@ from smccli.smc import (
     approach_in_frame,
     goal_from_object,
 )
-from smccli.tree import ROOT, load_tree
+from smccli.learn.tree import ROOT, load_tree
+from smccli.perception import Cluster
+from smccli.record.session import RecordConfig, record
 
 SCENE = Path(__file__).parent / "scenes" / "mug_place"
 PARAMS = SmcParams()
@@ -114,11 +114,11 @@ def test_the_mug_is_perceived_without_symmetry(mug_tree):
 def test_the_mug_lands_with_its_handle_where_it_was_shown(mug_tree):
     """From layouts with the mug turned anywhere (handle in view), the mug ends on the
     saucer with its handle pointing +y, as demonstrated: never turned by the gripper's pi."""
-    tree, scene = rp.resolve(mug_tree, str(SCENE / "scene.yaml"))
+    tree, scene = resolve(mug_tree, str(SCENE / "scene.yaml"))
     turned = 0
     for seed in range(1, 9):
-        layout = rp.layout_for(scene, seed)
-        result = rp.episode(tree, scene, layout)
+        layout = layout_for(scene, seed)
+        result = episode(tree, scene, layout)
         assert result.outcome == "success", (seed, result.reason)
         start_yaw = layout["mug"][3]
         end_yaw = result.final_poses["mug"][3]  # [x, y, z, yaw], evaluation only

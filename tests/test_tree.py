@@ -11,11 +11,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from smccli.contingency import c_f, d_a, d_p, match_context, merge
 from smccli.errors import TreeError
-from smccli.params import SmcParams, with_overrides
-from smccli.perception import Cluster
-from smccli.smc import (
+from smccli.learn.contingency import c_f, d_a, d_p, match_context, merge
+from smccli.learn.params import SmcParams, with_overrides
+from smccli.learn.smc import (
     SalientPerceptions,
     Smc,
     Source,
@@ -23,7 +22,8 @@ from smccli.smc import (
     goal_from_object,
     goal_in_object,
 )
-from smccli.tree import ROOT, Tree, digest, insert_chain, load_tree, save_tree, tree_to_dict
+from smccli.learn.tree import ROOT, Tree, digest, insert_chain, load_tree, save_tree, tree_to_dict
+from smccli.perception import Cluster
 
 PARAMS = SmcParams()
 

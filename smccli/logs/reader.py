@@ -33,7 +33,7 @@ from zstandard import ZstdError
 from smccli.errors import LogError
 from smccli.logs import topics as tp
 from smccli.outputs import check_output, write_atomic
-from smccli.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
+from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
 _log = logging.getLogger(__name__)
 
@@ -202,7 +202,7 @@ def _check_channels(path: Path, raw: _Raw) -> None:
 
 def _check_mjcf(data: bytes) -> str | None:
     """What is wrong with a ``scene.xml`` attachment, or None. Syntax only: whether MuJoCo
-    accepts the model is for its consumer (``RobotModel.from_log``) to find out."""
+    accepts the model is for its consumer (``smccli.logs.robot.robot_model_of``) to find out."""
     if not data.strip():
         return "empty (expected the scene's MJCF)"
     try:
@@ -214,10 +214,11 @@ def _check_mjcf(data: bytes) -> str | None:
     return None
 
 
-def _check_scene_yaml(data: bytes) -> str | None:
-    """What is wrong with a ``scene.yaml`` attachment, or None (syntax and outline only)."""
+def _check_scene_yaml(data: bytes, expected: str = "the scene file") -> str | None:
+    """What is wrong with a ``scene.yaml`` (or ``robot.yaml``) attachment, or None (syntax
+    and outline only)."""
     if not data.strip():
-        return "empty (expected the scene file)"
+        return f"empty (expected {expected})"
     try:
         doc = yaml.safe_load(data)
     except yaml.YAMLError as e:
@@ -233,6 +234,7 @@ def _check_scene_yaml(data: bytes) -> str | None:
 _ATTACHMENT_CHECKS: dict[str, Callable[[bytes], str | None]] = {
     "scene.xml": _check_mjcf,
     "scene.yaml": _check_scene_yaml,
+    "robot.yaml": lambda data: _check_scene_yaml(data, "the robot file"),
 }
 """Attachment name -> check; attachments of other names are the user's and not looked at."""
 

@@ -105,51 +105,43 @@ def stamp(msg: Any, t_ns: int) -> None:
     msg.timestamp.FromNanoseconds(t_ns)
 
 
-# --- rotations (quaternions are w, x, y, z) ---
+# --- rotations (quaternions are w, x, y, z, as MuJoCo's; foxglove's Pose names its fields) ---
+# MuJoCo's mju_* conversions use our convention natively (scalar first) and are fast
+# (~1 us a call); mujoco is imported on first use so reading a log does not load it.
 
 
 def yaw_to_quat(yaw: float) -> np.ndarray:
     """Rotation about world z by ``yaw`` [rad] -> quaternion (4,) wxyz."""
-    return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+    import mujoco
+
+    q = np.empty(4)
+    mujoco.mju_axisAngle2Quat(q, np.array([0.0, 0.0, 1.0]), float(yaw))
+    return q
 
 
 def quat_to_yaw(q: np.ndarray) -> float:
     """Yaw [rad] of a quaternion wxyz (heading of the rotated x axis), in (-pi, pi]."""
-    w, x, y, z = q
-    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    R = quat_to_matrix(q)
+    return math.atan2(R[1, 0], R[0, 0])
 
 
 def matrix_to_quat(R: np.ndarray) -> np.ndarray:
-    """Rotation matrix (3, 3) -> unit quaternion (4,) wxyz with w >= 0 (Shepperd's method)."""
-    m = np.asarray(R, dtype=float)
-    tr = np.trace(m)
-    if tr > 0:
-        s = 2 * math.sqrt(1 + tr)
-        q = [s / 4, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2 * math.sqrt(1 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = [(m[2, 1] - m[1, 2]) / s, s / 4, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
-    elif m[1, 1] > m[2, 2]:
-        s = 2 * math.sqrt(1 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, s / 4, (m[1, 2] + m[2, 1]) / s]
-    else:
-        s = 2 * math.sqrt(1 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, s / 4]
-    qa = np.array(q)
-    qa /= np.linalg.norm(qa)
-    return -qa if qa[0] < 0 else qa
+    """Rotation matrix (3, 3) -> unit quaternion (4,) wxyz with w >= 0."""
+    import mujoco
+
+    q = np.empty(4)
+    mujoco.mju_mat2Quat(q, np.ascontiguousarray(R, dtype=np.float64).reshape(9))
+    return -q if q[0] < 0 else q
 
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Quaternion (4,) wxyz -> rotation matrix (3, 3)."""
-    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    """Quaternion (4,) wxyz, any norm -> rotation matrix (3, 3)."""
+    import mujoco
+
+    qa = np.asarray(q, dtype=np.float64)
+    m = np.empty(9)
+    mujoco.mju_quat2Mat(m, qa / np.linalg.norm(qa))
+    return m.reshape(3, 3)
 
 
 def set_pose(pose: Any, position: np.ndarray, quat: np.ndarray) -> None:

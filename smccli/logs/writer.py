@@ -8,7 +8,7 @@ import time
 from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
@@ -26,7 +26,10 @@ from smccli import __version__
 from smccli.errors import LogError, OutputExistsError
 from smccli.logs import topics as tp
 from smccli.outputs import check_output
-from smccli.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
+from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
+
+if TYPE_CHECKING:
+    from smccli.world.scene import Scene
 
 
 def part_path(path: Path) -> Path:
@@ -374,3 +377,13 @@ class LogWriter:
         T = np.eye(4) if T_frame_scan is None else np.asarray(T_frame_scan, dtype=float)
         tp.set_pose(msg.pose, T[:3, 3], tp.matrix_to_quat(T[:3, :3]))
         self._proto(tp.SCAN, tp.to_ns(t), msg)
+
+
+def scene_attachments(scene: Scene) -> dict[str, tuple[str, bytes]]:
+    """The scene's MJCF and YAML and the robot file, attached to every log so it is
+    self-contained."""
+    return {
+        "scene.xml": ("application/xml", scene.mjcf.encode()),
+        "scene.yaml": ("application/yaml", scene.yaml_text.encode()),
+        "robot.yaml": ("application/yaml", scene.robot.yaml_text.encode()),
+    }

@@ -6,7 +6,7 @@ import numpy as np
 import open3d as o3d
 
 from smccli.perception.params import PerceptionParams
-from smccli.sensors import CameraFrame, RobotGeometry
+from smccli.world.sensors import CameraFrame, RobotGeometry
 
 
 def points_from_depth(frame: CameraFrame, max_depth: float = 5.0) -> tuple[np.ndarray, np.ndarray]:

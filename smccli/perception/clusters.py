@@ -11,7 +11,7 @@ import open3d as o3d
 from smccli.perception.cloud import object_points, plane_distance
 from smccli.perception.histogram import hsv_histogram
 from smccli.perception.params import PerceptionParams
-from smccli.sensors import CameraFrame, RobotGeometry
+from smccli.world.sensors import CameraFrame, RobotGeometry
 
 
 @dataclass(frozen=True, slots=True)

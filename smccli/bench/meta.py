@@ -1,0 +1,43 @@
+"""What every benchmark file records beside its figures: the machine, the commit, the time.
+
+A figure means little without where and at which commit it was measured.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import subprocess
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _git(*args: str) -> str:
+    return subprocess.run(
+        ["git", *args], cwd=ROOT, capture_output=True, text=True, check=True
+    ).stdout.strip()
+
+
+def commit() -> str:
+    """The checkout's commit (``+dirty`` with uncommitted changes), or ``unknown``."""
+    try:
+        rev = _git("rev-parse", "--short=12", "HEAD")
+        dirty = _git("status", "--porcelain", "--untracked-files=no")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return rev + ("+dirty" if dirty else "")
+
+
+def machine() -> dict[str, Any]:
+    """CPUs, platform, Python, GL backend, commit and start time of this run."""
+    return {
+        "cpus": os.cpu_count(),
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        "gl": os.environ.get("MUJOCO_GL"),
+        "commit": commit(),
+        "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
+    }

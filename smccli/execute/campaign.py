@@ -1,0 +1,270 @@
+"""Replay campaigns: N randomised layouts of a scene, in parallel, with statistics.
+
+Trial ``i`` of a campaign with seed ``S`` runs on ``sample_layout(scene,
+np.random.default_rng([S, i]))``, so a campaign gives the same layouts and the same results
+whatever the number of workers (each trial is a fresh simulation; perception and control are
+deterministic). Workers are processes of the ``spawn`` context: EGL contexts do not survive
+``fork``. Campaigns write no replay log and render only at decision points.
+
+Statistics: success rate with a Wilson 95 % interval; success by distance band of the
+manipulated object's start from its nominal (demonstrated) position (paper Fig. 11);
+failures by cause (see :data:`smccli.execute.evaluation.OUTCOMES`); decision latency percentiles
+(perceive + match, paper Fig. 12a); task duration against the demonstration's (Fig. 12b).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import json  # noqa: E402
+import math  # noqa: E402
+import multiprocessing as mp  # noqa: E402
+import time  # noqa: E402
+from collections.abc import Callable, Sequence  # noqa: E402
+from dataclasses import asdict, dataclass  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+from scipy.stats import binomtest  # noqa: E402
+
+from smccli.errors import SmcError  # noqa: E402
+from smccli.execute.episode import episode, layout_for, resolve, scene_note  # noqa: E402
+from smccli.execute.evaluation import OUTCOMES  # noqa: E402
+from smccli.learn.tree import Tree, digest  # noqa: E402
+from smccli.outputs import check_output, write_atomic  # noqa: E402
+from smccli.world.scene import Scene  # noqa: E402
+
+BANDS = (0.0, 0.05, 0.10, 0.15, 0.20, 0.25, 0.30, math.inf)
+"""Edges of the distance bands [m] (paper Fig. 11 uses rings around the demonstrated pose)."""
+FAILURES = tuple(o for o in OUTCOMES if o != "success")
+
+
+def wilson(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval (lo, hi) of a binomial proportion; (0, 1) when n = 0."""
+    if n <= 0:
+        return 0.0, 1.0  # no trial: the rate may be anything (scipy refuses n = 0)
+    ci = binomtest(successes, n).proportion_ci(confidence_level=confidence, method="wilson")
+    return float(ci.low), float(ci.high)
+
+
+@dataclass(frozen=True, slots=True)
+class TrialResult:
+    """One trial, in plain values (crosses process boundaries, goes into the report)."""
+
+    index: int
+    """Trial index i (layout from ``default_rng([seed, i])``)."""
+    outcome: str
+    """Episode outcome (:data:`smccli.execute.evaluation.OUTCOMES`)."""
+    success: bool
+    """Success by the scene's criterion."""
+    object: str | None
+    """The manipulated object."""
+    distance: float
+    """Its start's horizontal distance from its nominal position [m]."""
+    yaw_distance: float
+    """Its start yaw's distance from the nominal yaw, modulo a full turn [rad]."""
+    path: list[str]
+    """Edges taken."""
+    latency_ms: list[float]
+    """Per decision: perceive + match [ms]."""
+    perceive_ms: list[float]
+    """Per decision: render + clusters [ms]."""
+    match_ms: list[float]
+    """Per decision: matching the candidates [ms]."""
+    duration: float
+    """Task duration [s of sim time]."""
+    demo_duration: float
+    """Demonstration duration of the path taken [s]."""
+    wall_time: float
+    """Wall time of the trial [s]."""
+    reason: str
+    """The criterion's text or what stopped control."""
+    layout: dict[str, list[float]]
+    """Object poses at the start."""
+
+
+def run_trial(tree: Tree, scene: Scene, seed: int, index: int) -> TrialResult:
+    """Trial ``index`` of the campaign with ``seed``."""
+    layout = layout_for(scene, seed, index)
+    r = episode(tree, scene, layout, seed=seed)
+    obj = r.manipulated
+    dist = yaw = 0.0
+    if obj is not None:
+        spec = scene.object(obj)
+        dist = math.dist(layout[obj][:2], spec.pose[:2])
+        yaw = abs(math.remainder(layout[obj][3] - spec.pose[3], 2 * math.pi))
+    return TrialResult(
+        index=index,
+        outcome=r.outcome,
+        success=r.success,
+        object=obj,
+        distance=dist,
+        yaw_distance=yaw,
+        path=list(r.path),
+        latency_ms=r.latencies_ms,
+        perceive_ms=[1e3 * d.perceive_s for d in r.decisions],
+        match_ms=[1e3 * d.match_s for d in r.decisions],
+        duration=r.duration,
+        demo_duration=r.demo_duration,
+        wall_time=r.wall_time,
+        reason=r.reason,
+        layout={k: list(v) for k, v in layout.items()},
+    )
+
+
+# --- workers ----------------------------------------------------------------------------
+
+_WORKER: dict[str, Any] = {}
+
+
+def _init_worker(tree: Tree, scene: Scene, seed: int) -> None:
+    _WORKER.update(tree=tree, scene=scene, seed=seed)
+
+
+def _work(index: int) -> TrialResult:
+    return run_trial(_WORKER["tree"], _WORKER["scene"], _WORKER["seed"], index)
+
+
+def run_trials(
+    tree: Tree,
+    scene: Scene,
+    *,
+    trials: int,
+    seed: int = 0,
+    workers: int = 1,
+    on_trial: Callable[[int, int], None] | None = None,
+    indices: Sequence[int] | None = None,
+) -> list[TrialResult]:
+    """Run the trials (``range(trials)`` or ``indices``) over ``workers`` processes;
+    results in index order. ``on_trial(done, successes)`` after each."""
+    todo = list(range(trials)) if indices is None else list(indices)
+    results: list[TrialResult] = []
+    ok = 0
+    if workers <= 1 or len(todo) <= 1:
+        for i in todo:
+            results.append(run_trial(tree, scene, seed, i))
+            ok += results[-1].success
+            if on_trial:
+                on_trial(len(results), ok)
+    else:
+        ctx = mp.get_context("spawn")
+        with ctx.Pool(
+            min(workers, len(todo)), initializer=_init_worker, initargs=(tree, scene, seed)
+        ) as pool:
+            for res in pool.imap_unordered(_work, todo, chunksize=1):
+                results.append(res)
+                ok += res.success
+                if on_trial:
+                    on_trial(len(results), ok)
+    return sorted(results, key=lambda r: r.index)
+
+
+# --- statistics -------------------------------------------------------------------------
+
+
+def _pct(values: Sequence[float], q: float) -> float | None:
+    return float(np.percentile(values, q)) if len(values) else None
+
+
+def summarize(
+    results: Sequence[TrialResult],
+    *,
+    scene: Scene,
+    tree: Tree,
+    seed: int,
+    workers: int,
+    wall_s: float,
+    bands: Sequence[float] = BANDS,
+) -> dict[str, Any]:
+    """The campaign summary (the ``--report`` JSON)."""
+    n = len(results)
+    succ = sum(r.success for r in results)
+    by_band = []
+    for lo, hi in zip(bands[:-1], bands[1:], strict=True):
+        sel = [r for r in results if lo <= r.distance < hi]
+        if not sel and math.isinf(hi):
+            continue
+        k = sum(r.success for r in sel)
+        by_band.append(
+            {
+                "band": [lo, None if math.isinf(hi) else hi],
+                "label": f"{lo:.2f}-{hi:.2f} m" if not math.isinf(hi) else f">{lo:.2f} m",
+                "trials": len(sel),
+                "successes": k,
+                "success_rate": k / len(sel) if sel else None,
+                "ci95": list(wilson(k, len(sel))),
+            }
+        )
+    failures = {c: sum(r.outcome == c for r in results) for c in FAILURES}
+    lat = [v for r in results for v in r.latency_ms]
+    per = [v for r in results for v in r.perceive_ms]
+    mat = [v for r in results for v in r.match_ms]
+    done = [r for r in results if r.success]
+    dur = [r.duration for r in done]
+    ratio = [r.duration / r.demo_duration for r in done if r.demo_duration > 0]
+    return {
+        "scene": scene.name,
+        "robot": scene.robot.name,
+        "tree_digest": digest(tree),
+        "seed": seed,
+        "workers": workers,
+        "trials": n,
+        "successes": succ,
+        "success_rate": succ / n if n else 0.0,
+        "ci95": list(wilson(succ, n)),
+        "by_band": by_band,
+        "failures": failures,
+        "latency_ms": {
+            "p50": _pct(lat, 50),
+            "p95": _pct(lat, 95),
+            "max": max(lat, default=None),
+            "perceive_p50": _pct(per, 50),
+            "match_p50": _pct(mat, 50),
+            "decisions": len(lat),
+        },
+        "duration_s": {
+            "p50": _pct(dur, 50),
+            "p95": _pct(dur, 95),
+            "demo": _pct([r.demo_duration for r in done], 50),
+            "ratio_p50": _pct(ratio, 50),
+        },
+        "wall_s": wall_s,
+        "trials_per_second": n / wall_s if wall_s > 0 else None,
+        "trial_results": [asdict(r) for r in results],
+    }
+
+
+def run_campaign(
+    tree: Path | Tree,
+    *,
+    scene: str | Path | Scene | None = None,
+    trials: int,
+    seed: int = 0,
+    workers: int = 1,
+    report: Path | None = None,
+    on_trial: Callable[[int, int], None] | None = None,
+    force: bool = False,
+) -> dict[str, Any]:
+    """``smc replay TREE --trials N --seed S --workers W [--report FILE]``: the summary.
+
+    The report is checked before the first trial (folder writable; an existing file needs
+    ``force``) and written atomically.
+    """
+    if trials <= 0:
+        raise SmcError(f"--trials must be positive, found {trials}")
+    if report is not None:
+        check_output(report, force=force)
+    t, sc = resolve(tree, scene)
+    wall0 = time.perf_counter()
+    results = run_trials(t, sc, trials=trials, seed=seed, workers=workers, on_trial=on_trial)
+    summary = summarize(
+        results, scene=sc, tree=t, seed=seed, workers=workers, wall_s=time.perf_counter() - wall0
+    )
+    summary["tree"] = None if isinstance(tree, Tree) else str(tree)
+    summary["note"] = scene_note(t, sc)
+    if report is not None:
+        write_atomic(report, json.dumps(summary, indent=1, allow_nan=False) + "\n")
+    return summary

@@ -1,0 +1,296 @@
+"""``smc replay``: one episode of an SMC tree in simulation (paper 3.6, 3.9, 5.1).
+
+An episode loads the tree and the scene it runs in (:func:`resolve`), builds the layout
+(:func:`layout_for`, :func:`read_layout`), runs Algorithm 2 through the robot's sensors
+(:class:`~smccli.execute.executor.TreeExecutor` over
+:class:`~smccli.execute.sensing.Sensors`), lets the scene settle at a leaf, and only then
+scores it from the simulator's truth (:func:`smccli.execute.evaluation.score`).
+Optionally it writes a replay log (:class:`~smccli.execute.replay_log.ReplayLog`) and a JSON
+report.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from smccli.errors import OutputError, SceneError, TreeError
+from smccli.execute.evaluation import score
+from smccli.execute.executor import ActionTrace, Decision, TreeExecutor
+from smccli.execute.replay_log import ReplayLog
+from smccli.execute.sensing import Sensors
+from smccli.learn.tree import Edge, Tree, digest, load_tree
+from smccli.outputs import check_output, write_atomic
+from smccli.world.scene import (
+    Layout,
+    Scene,
+    builtin_names,
+    load_layout_file,
+    load_scene,
+    robot_identity,
+    sample_layout,
+    sensor_identity,
+)
+from smccli.world.sim import Sim
+
+FINAL_SETTLE = 1.0
+"""Sim time the scene settles at a leaf before scoring [s]."""
+
+
+@dataclass(frozen=True, slots=True)
+class EpisodeResult:
+    """Outcome and trace of one replay episode."""
+
+    outcome: str
+    """One of :data:`smccli.execute.evaluation.OUTCOMES`."""
+    success: bool
+    """The scene's success criterion at the end."""
+    reason: str
+    """Why: the success criterion's text, or what stopped control."""
+    decisions: tuple[Decision, ...]
+    actions: tuple[ActionTrace, ...]
+    path: tuple[str, ...]
+    """Edge ids taken."""
+    layout: Layout
+    """Object poses at the start."""
+    duration: float
+    """Sim time of the task: first decision to the last action's end [s]."""
+    demo_duration: float
+    """Sum of the source fragment durations of the path taken (mean per edge) [s]."""
+    wall_time: float
+    """Wall time of the episode [s]."""
+    manipulated: str | None = None
+    """The object the task moves (from the success criterion), for distance bands."""
+    final_poses: dict[str, list[float]] = field(default_factory=dict)
+    """Object [x, y, z, yaw] at the end (evaluation)."""
+    output: Path | None = None
+    """The replay log written, if any."""
+    note: str | None = None
+    """Said about the run, e.g. that the scene is not the one the tree was taught in."""
+
+    @property
+    def latencies_ms(self) -> list[float]:
+        return [1e3 * d.latency_s for d in self.decisions]
+
+    def to_report(self) -> dict[str, Any]:
+        """The JSON report of ``--report``."""
+        lat = self.latencies_ms
+        return {
+            "outcome": self.outcome,
+            "success": self.success,
+            "reason": self.reason,
+            "path": list(self.path),
+            "layout": {k: list(v) for k, v in self.layout.items()},
+            "final_poses": self.final_poses,
+            "decisions": [d.to_json() for d in self.decisions],
+            "latency_ms": {
+                "per_decision": lat,
+                "p50": float(np.median(lat)) if lat else None,
+                "max": max(lat) if lat else None,
+            },
+            "duration_s": self.duration,
+            "demo_duration_s": self.demo_duration,
+            "duration_ratio": self.duration / self.demo_duration if self.demo_duration else None,
+            "wall_time_s": self.wall_time,
+            "output": None if self.output is None else str(self.output),
+            "note": self.note,
+        }
+
+
+# --- the tree and scene ----------------------------------------------------------------
+
+
+def resolve(tree_path: Path | Tree, scene: str | Path | Scene | None) -> tuple[Tree, Scene]:
+    """Load the tree and the scene it runs in (default: the scene it was taught in).
+
+    Another scene is accepted when it holds the same robot (name and kinematics) and the
+    same sensors (:func:`check_fits`): a cluttered copy of the teaching scene is the common
+    case; :func:`scene_note` says so. TreeError (one line) otherwise.
+    """
+    tree = tree_path if isinstance(tree_path, Tree) else load_tree(Path(tree_path))
+    where = "tree" if isinstance(tree_path, Tree) else str(tree_path)
+    if not tree.edges:
+        raise TreeError(f"{where}: the tree holds no SMC (compile a demonstration first)")
+    tree_scene = str(tree.scene.get("name", "")) if tree.scene else ""
+    if scene is None:
+        if tree_scene not in builtin_names():
+            raise SceneError(
+                f"{where}: built for scene {tree_scene!r}, which is not built in; pass --scene PATH"
+            )
+        sc = load_scene(tree_scene)
+    else:
+        sc = scene if isinstance(scene, Scene) else load_scene(scene)
+    check_fits(tree, sc, where)
+    return tree, sc
+
+
+def check_fits(tree: Tree, scene: Scene, where: str = "tree") -> None:
+    """TreeError unless ``scene`` holds the robot the tree was taught on and the sensors it
+    perceives through (a scene other than the teaching one is fine then)."""
+    tree_scene = str(tree.scene.get("name", "")) if tree.scene else ""
+    if not tree.robot:  # a tree from before robot files: only its own scene is safe
+        if tree_scene and scene.name != tree_scene:
+            raise TreeError(
+                f"{where}: built for scene {tree_scene!r}, not {scene.name!r} (the tree does "
+                "not record its robot; compile it again with --rebuild to run it elsewhere)"
+            )
+        return
+    model = scene.model()
+    robot = robot_identity(scene, model)
+    if robot != tree.robot:
+        same = robot["name"] == tree.robot.get("name")
+        raise TreeError(
+            f"{where}: taught on robot {tree.robot.get('name')!r}; scene {scene.name} holds "
+            + (
+                f"a robot of that name with other kinematics ({robot['kinematics'][7:19]} "
+                f"vs {str(tree.robot.get('kinematics'))[7:19]})"
+                if same
+                else f"robot {robot['name']!r}"
+            )
+            + "; a tree runs only on the robot it was taught on"
+        )
+    want = tree.scene.get("sensors")
+    if want:
+        have = sensor_identity(scene, model)
+        if want.get("camera") != have["camera"]:
+            a, b = want.get("camera", {}), have["camera"]
+            raise TreeError(
+                f"{where}: perceives through a {a.get('width')}x{a.get('height')} camera with a "
+                f"{a.get('fovy'):g} deg field of view; scene {scene.name}'s is {b['width']}x"
+                f"{b['height']}, {b['fovy']:g} deg"
+            )
+        if want.get("scale") and not have["scale"]:
+            raise TreeError(f"{where}: perceives weight; scene {scene.name} has no scale")
+
+
+def scene_note(tree: Tree, scene: Scene) -> str | None:
+    """A note when the tree runs in a scene other than the one it was taught in."""
+    tree_scene = str(tree.scene.get("name", "")) if tree.scene else ""
+    if tree_scene and scene.name != tree_scene:
+        return (
+            f"taught in scene {tree_scene!r}, running in {scene.name!r} "
+            f"(same robot {scene.robot.name!r} and sensors)"
+        )
+    return None
+
+
+def layout_for(scene: Scene, seed: int, trial: int = 0) -> Layout:
+    """The layout of trial ``trial`` of a campaign with ``seed`` (an episode is trial 0)."""
+    return sample_layout(scene, np.random.default_rng([seed, trial]))
+
+
+def read_layout(path: Path, scene: Scene) -> Layout:
+    """A layout file (schemas/layout.schema.json): object -> [x, y, z, yaw] or [x, y, yaw]."""
+    return load_layout_file(path, scene)
+
+
+# --- episodes -----------------------------------------------------------------------------
+
+
+def demo_duration(path: Sequence[Edge]) -> float:
+    """Sum over the edges taken of their source fragments' mean duration [s]."""
+    return float(sum(np.mean([s.t1 - s.t0 for s in e.sources]) for e in path if e.sources))
+
+
+def episode(
+    tree: Tree,
+    scene: Scene,
+    layout: Layout,
+    *,
+    seed: int = 0,
+    output: Path | None = None,
+    force: bool = False,
+    evaluate: Callable[[Sim], None] | None = None,
+) -> EpisodeResult:
+    """Run Algorithm 2 once on ``layout`` and score it. ``evaluate`` runs first thing after
+    control (tests use it to re-enable object queries)."""
+    wall0 = time.perf_counter()
+    sim = Sim(scene, layout)
+    log = None
+    try:
+        if output is not None:
+            log = ReplayLog(Path(output), scene, sim, tree, seed, layout, force)
+        sensors = Sensors(sim, on_step=None if log is None else log.on_step)
+        sensors.render_camera()  # the camera is running before the task starts (GL warm-up)
+        executor = TreeExecutor(tree, sensors, on_decision=None if log is None else log.on_decision)
+        t0 = sim.t
+        outcome, reason, decisions, actions, path = executor.run()
+        duration = sim.t - t0
+        if outcome == "success":
+            for _ in range(round(FINAL_SETTLE / sim.control_period)):
+                executor.hold()
+        if log is not None:
+            log.close()
+            log = None
+    except BaseException:
+        if log is not None:
+            log.abort()
+        raise
+    finally:
+        sim.close()
+    # --- evaluation: control is over, the simulator may be read ---
+    if evaluate is not None:
+        evaluate(sim)
+    verdict = score(sim, scene, layout, outcome=outcome, reason=reason, actions=actions)
+    return EpisodeResult(
+        outcome=verdict.outcome,
+        success=verdict.success,
+        reason=verdict.reason,
+        decisions=tuple(decisions),
+        actions=tuple(actions),
+        path=tuple(e.id for e in path),
+        layout=layout,
+        duration=duration,
+        demo_duration=demo_duration(path),
+        wall_time=time.perf_counter() - wall0,
+        manipulated=verdict.manipulated,
+        final_poses=verdict.final_poses,
+        output=None if output is None else Path(output),
+    )
+
+
+def run_episode(
+    tree: Path | Tree,
+    *,
+    scene: str | Path | Scene | None = None,
+    seed: int = 0,
+    layout: Path | Layout | None = None,
+    output: Path | None = None,
+    report: Path | None = None,
+    force: bool = False,
+) -> EpisodeResult:
+    """``smc replay TREE``: one episode on the layout file or the seed's layout (trial 0).
+
+    Raises TreeError/SceneError (exit 2) for a bad tree or scene, OutputError before any
+    work when an output cannot be written (or exists without ``force``).
+    """
+    if output is not None and report is not None and Path(output) == Path(report):
+        raise OutputError(f"{output}: given as both the replay log and the report")
+    for out in (output, report):
+        if out is not None:
+            check_output(out, force=force)
+    t, sc = resolve(tree, scene)
+    if layout is None:
+        lay = layout_for(sc, seed)
+    elif isinstance(layout, dict):
+        lay = layout
+    else:
+        lay = read_layout(Path(layout), sc)
+    result = episode(t, sc, lay, seed=seed, output=output, force=force)
+    result = replace(result, note=scene_note(t, sc))
+    if report is not None:
+        doc = {
+            "tree": str(tree) if not isinstance(tree, Tree) else None,
+            "tree_digest": digest(t),
+            "scene": sc.name,
+            "seed": seed,
+            **result.to_report(),
+        }
+        write_atomic(report, json.dumps(doc, indent=1, allow_nan=False) + "\n")
+    return result

@@ -1,0 +1,118 @@
+"""Scoring a replay episode once control is over: the outcome and why it failed.
+
+The only replay module that reads the simulator's truth (object poses, the scene's success
+criterion); the executor (:mod:`smccli.execute.executor`) and the sensors it sees
+(:mod:`smccli.execute.sensing`) never import it, so control cannot read ground truth.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from smccli.execute.executor import CONTROL_OUTCOMES, ActionTrace
+from smccli.world.scene import Layout, Scene
+from smccli.world.sim import Sim
+
+OUTCOMES = (
+    *CONTROL_OUTCOMES,
+    "grasp_missed",
+    "object_dropped",
+    "placed_outside",
+)
+"""Episode outcomes: success, the three control stops, then the failure causes found at
+evaluation time from the trace and the final state."""
+
+EMPTY_GRIP = 0.08
+"""A closed gripper whose opening is below this holds nothing [fraction of full opening]."""
+
+
+@dataclass(frozen=True, slots=True)
+class Verdict:
+    """The evaluation of one episode."""
+
+    outcome: str
+    """One of :data:`OUTCOMES`."""
+    success: bool
+    """The scene's success criterion at the end."""
+    reason: str
+    """Why: the success criterion's text, or what stopped control."""
+    manipulated: str | None
+    """The object the task moves (:func:`manipulated_object`)."""
+    final_poses: dict[str, list[float]]
+    """Object [x, y, z, yaw] at the end [m, rad]."""
+
+
+def score(
+    sim: Sim,
+    scene: Scene,
+    layout: Layout,
+    *,
+    outcome: str,
+    reason: str,
+    actions: Sequence[ActionTrace],
+) -> Verdict:
+    """Score an episode whose control ended with ``outcome`` (:data:`CONTROL_OUTCOMES`):
+    read the final object poses and, when a leaf was reached, the scene's success criterion;
+    a leaf without success gets its failure cause (:func:`classify_failure`)."""
+    final = {o.name: [float(v) for v in sim.object_pose(o.name)] for o in scene.objects}
+    obj = manipulated_object(scene, layout, final)
+    ok = False
+    if outcome == "success":
+        criterion = sim.success()
+        ok = bool(criterion)
+        reason = criterion.reason
+        if not ok:
+            outcome = classify_failure(scene, layout, final, actions, obj)
+    return Verdict(outcome=outcome, success=ok, reason=reason, manipulated=obj, final_poses=final)
+
+
+def manipulated_object(scene: Scene, layout: Layout, final: dict[str, list[float]]) -> str | None:
+    """The object the task moves: of the success criteria's objects, the one that moved
+    most (the first one when none moved)."""
+    names = [c.object for crit in scene.success for c in crit.any_of if c.object in layout]
+    if not names:
+        return None
+    moved = [
+        (math.dist(layout[n][:2], final[n][:2]) if n in final else 0.0, -i, n)
+        for i, n in enumerate(names)
+    ]
+    best = max(moved)
+    return best[2] if best[0] > 0.02 else names[0]
+
+
+def classify_failure(
+    scene: Scene,
+    layout: Layout,
+    final: dict[str, list[float]],
+    actions: Sequence[ActionTrace],
+    obj: str | None,
+) -> str:
+    """Why an episode that reached a leaf failed: grasp_missed, object_dropped, placed_outside.
+
+    From the trace (gripper openings after close events, before open events) and the final
+    poses: fingers closed on nothing or the object never left its place -> grasp_missed;
+    fingers closed on nothing later, or the object ended far from any target ->
+    object_dropped; else placed_outside.
+    """
+    closes = [a for a in actions if a.event == "close"]
+    if any(a.opening_after < EMPTY_GRIP for a in closes[:1]):
+        return "grasp_missed"
+    if obj is None:
+        return "placed_outside"
+    if math.dist(layout[obj][:2], final[obj][:2]) < 0.02:
+        return "grasp_missed"
+    opens = [a for a in actions if a.event == "open"]
+    if any(a.opening_before < EMPTY_GRIP for a in opens):
+        return "object_dropped"
+    targets = [c.target for crit in scene.success for c in crit.any_of if c.object == obj]
+    near = min(
+        (
+            math.dist(final[obj][:2], final[t][:2]) - scene.object(t).footprint_radius
+            for t in targets
+            if t in final
+        ),
+        default=0.0,
+    )
+    return "object_dropped" if near > 0.05 else "placed_outside"

@@ -1,0 +1,72 @@
+"""What control may use during replay: the robot's sensors and its command input.
+
+Honesty (DESIGN.md section 2): the executor (:mod:`smccli.execute.executor`) sees the
+simulator only through :class:`Sensors`, which has no ground truth and no object state.
+Object poses are read after control by :mod:`smccli.execute.evaluation`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from smccli.world.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
+from smccli.world.sim import Sim
+
+
+class Sensors:
+    """What control may use: the robot's sensors and its command input, nothing else.
+
+    A facade over :class:`Sim` without ground truth or object state; ``on_step`` (the
+    replay log) observes each control period.
+    """
+
+    def __init__(self, sim: Sim, on_step: Callable[[PoiCommand], None] | None = None) -> None:
+        self._sim = sim
+        self._on_step = on_step
+        self.model = sim.model
+        """The robot's kinematic model (for reachability; no object state is read)."""
+        self.robot = sim.robot
+        """The robot file: joints, POI, gripper, home posture."""
+        self.control_period = sim.control_period
+        """Control period [s]."""
+        self.has_scale = sim.scene.scale is not None
+        """The scene has a scale under the table."""
+
+    @property
+    def t(self) -> float:
+        """Simulation time [s]."""
+        return self._sim.t
+
+    def step(self, cmd: PoiCommand) -> None:
+        """Send one command and advance one control period."""
+        self._sim.step(cmd)
+        if self._on_step is not None:
+            self._on_step(cmd)
+
+    def poi(self) -> np.ndarray:
+        """POI ``[x, y, z, yaw]`` [m, m, m, rad]."""
+        return self._sim.poi()
+
+    def gripper_opening(self) -> float:
+        """Finger opening over its maximum, in [0, 1]."""
+        return self._sim.gripper_opening()
+
+    def gripper_speed(self) -> float:
+        """Rate of change of the opening [1/s]."""
+        return self._sim.gripper_speed()
+
+    def joint_state(self) -> JointState:
+        return self._sim.joint_state()
+
+    def weight(self) -> float | None:
+        """Scale reading [kg]; None without a scale."""
+        return self._sim.weight()
+
+    def render_camera(self) -> CameraFrame:
+        return self._sim.render_camera()
+
+    def robot_geometry(self) -> RobotGeometry:
+        """The robot's own links from its kinematic model and joint readings (self-filter)."""
+        return self._sim.robot_geometry()

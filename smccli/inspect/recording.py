@@ -1,0 +1,1005 @@
+"""``smc inspect``: a tree and its logs as Rerun recordings (DESIGN.md section 6).
+
+One recording per log (a tree alone: one recording), all in application ``smc``; each
+holds the tree (static) and the log on the timeline ``time`` (simulation seconds):
+
+- ``/tree``: the tree as a graph, one GraphNodes node per decision point and one
+  GraphEdges edge per SMC; ``/tree/labels``: one labelled node per SMC at its edge's
+  midpoint, coloured with its salient object's dominant colour (salient perceptions,
+  gripper event, support, sources); ``/tree/smcs``: the same as a Markdown table.
+- ``/world/actions/<edge>``: each SMC's DMP rolled out at its demonstrated start and goal
+  (world frame), coloured by branch; ``.../goal`` its goal, ``.../object`` its salient object.
+- ``/world/poi``: the POI (moving point) and ``/world/poi/path`` the path taken;
+  ``/world/camera``: pose, pinhole, ``image`` and ``depth``; ``/world/decisions/*``: point
+  cloud, clusters and the salient one recomputed at each decision point, and for replays
+  the mapped goal and the planned path; ``/world/perception/points``: recorded clouds.
+- ``/signals/...``: weight, gripper command, POI coordinates and speed, replay distances.
+- ``/events/saliency`` (one TextLog per saliency mark), ``/events/fragments``,
+  ``/events/decisions`` (one per ``/smc/decision`` record).
+
+Rerun is imported only here. ``--serve`` runs the ``rerun`` binary shipped with
+rerun-sdk (the Python API binds every interface; the binary takes ``--bind``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import tempfile
+import time
+import urllib.parse
+import urllib.request
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from smccli.errors import LogError, SmcError
+from smccli.learn.tree import ROOT, Edge, Tree, load_tree
+from smccli.outputs import check_output
+from smccli.perception.colours import colour_name, dominant_rgb
+
+APP_ID = "smc"
+TIMELINE = "time"
+MAX_CLOUD_POINTS = 40_000
+"""Point clouds are subsampled to at most this many points (viewer and file size)."""
+
+_PALETTE = [
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (127, 127, 127),
+    (188, 189, 34),
+    (23, 190, 207),
+]
+_HIGHLIGHT = (255, 215, 0)
+_NODE = (90, 90, 90)
+_ROOT = (20, 20, 20)
+
+
+@dataclass(frozen=True, slots=True)
+class InspectResult:
+    """What ``inspect`` produced."""
+
+    recordings: tuple[str, ...]
+    """Recording ids, one per log (``tree`` when no log was given)."""
+    rrd: Path | None
+    """The .rrd written (``--save``), else None."""
+    url: str | None = None
+    """The web viewer's address (``--serve``), else None."""
+    warnings: tuple[str, ...] = field(default_factory=tuple)
+    """One-line warnings (log without joint states, unknown edge in a decision...)."""
+
+
+# --- public entry ---------------------------------------------------------------------
+
+
+def inspect(
+    tree_path: Path,
+    logs: Sequence[Path] = (),
+    *,
+    save: Path | None = None,
+    spawn: bool = False,
+    serve: bool = False,
+    port: int = 9090,
+    force: bool = False,
+    on_warning: Callable[[str], None] | None = None,
+    on_message: Callable[[str], None] | None = None,
+) -> InspectResult:
+    """Show ``tree_path`` and ``logs`` in Rerun: write ``save`` (.rrd), spawn or serve a viewer.
+
+    The output is checked first (its folder exists and is writable; an existing file needs
+    ``force``), then inputs are all read and checked: a missing or corrupt tree or log raises
+    TreeError / LogError (one line naming the file) before anything is written.
+    ``serve`` blocks until Ctrl-C, then stops the viewer it started; ``on_message`` hears
+    the address it serves at.
+    """
+    if sum([save is not None, spawn, serve]) != 1:
+        raise SmcError("inspect: choose exactly one of --save, --spawn, --serve")
+    warnings: list[str] = []
+
+    def warn(msg: str) -> None:
+        warnings.append(msg)
+        if on_warning is not None:
+            on_warning(msg)
+
+    if save is not None:
+        check_output(save, force=force)
+    tree = load_tree(Path(tree_path))
+    from smccli.logs import read_log
+
+    loaded = [read_log(Path(p), on_warning=warn) for p in logs]
+    if serve:
+        with tempfile.TemporaryDirectory(prefix="smc-inspect-") as tmp:
+            rrd = Path(tmp) / "inspect.rrd"
+            ids = write_rrd(tree, loaded, rrd, tree_name=Path(tree_path).name, warn=warn)
+            serve_rrd(rrd, port=port, on_message=on_message)
+        return InspectResult(tuple(ids), None, f"http://127.0.0.1:{port}", tuple(warnings))
+    if spawn:
+        ids = spawn_viewer(tree, loaded, tree_name=Path(tree_path).name, warn=warn)
+        return InspectResult(tuple(ids), None, None, tuple(warnings))
+    assert save is not None
+    ids = write_rrd(tree, loaded, Path(save), tree_name=Path(tree_path).name, warn=warn)
+    return InspectResult(tuple(ids), Path(save), None, tuple(warnings))
+
+
+# --- recordings -------------------------------------------------------------------------
+
+
+def _recording_plan(tree: Tree, logs: Sequence[Any], tree_name: str) -> list[tuple[str, Any]]:
+    """(recording id, log or None) pairs: one per log, or one for the tree alone."""
+    if not logs:
+        return [(f"{Path(tree_name).stem}", None)]
+    seen: dict[str, int] = {}
+    plan = []
+    for log in logs:
+        rid = Path(log.path).stem
+        seen[rid] = seen.get(rid, 0) + 1
+        plan.append((rid if seen[rid] == 1 else f"{rid}-{seen[rid]}", log))
+    return plan
+
+
+def _fill(rec: Any, tree: Tree, log: Any, warn: Callable[[str], None]) -> None:
+    log_tree(rec, tree)
+    if log is not None:
+        log_log(rec, log, tree, warn=warn)
+
+
+def write_rrd(
+    tree: Tree,
+    logs: Sequence[Any],
+    out: Path,
+    *,
+    tree_name: str = "tree.json",
+    warn: Callable[[str], None] = lambda m: None,
+) -> list[str]:
+    """Write one .rrd holding a recording per log (the tree in each); returns their ids."""
+    import rerun as rr
+
+    out = check_output(out, force=True)  # overwriting was the caller's decision
+    plan = _recording_plan(tree, logs, tree_name)
+    bp = blueprint()
+    with tempfile.TemporaryDirectory(prefix="smc-rrd-", dir=out.parent) as tmp:
+        parts = []
+        for k, (rid, log) in enumerate(plan):
+            part = Path(tmp) / f"{k}.rrd"
+            rec = rr.RecordingStream(APP_ID, recording_id=rid)
+            rec.save(part, default_blueprint=bp)
+            rec.send_recording_name(rid)
+            _fill(rec, tree, log, warn)
+            rec.flush()
+            rec.disconnect()
+            parts.append(part)
+        staged = Path(tmp) / "out.rrd"
+        if len(parts) == 1:
+            shutil.move(parts[0], staged)
+        else:
+            # A Python stream writes one recording per file (files with footers cannot be
+            # concatenated); the rerun binary merges them and keeps the recordings apart.
+            proc = subprocess.run(
+                [rerun_binary(), "rrd", "merge", *map(str, parts), "-o", str(staged)],
+                capture_output=True,
+                text=True,
+            )
+            if proc.returncode != 0 or not staged.is_file():
+                last = (proc.stderr.strip().splitlines() or ["no output"])[-1]
+                raise SmcError(f"{out}: rerun rrd merge failed ({last})")
+        os.replace(staged, out)
+    return [rid for rid, _ in plan]
+
+
+def spawn_viewer(
+    tree: Tree,
+    logs: Sequence[Any],
+    *,
+    tree_name: str = "tree.json",
+    warn: Callable[[str], None] = lambda m: None,
+) -> list[str]:
+    """Send the recordings to a native viewer (spawned if none listens on 9876)."""
+    import rerun as rr
+
+    plan = _recording_plan(tree, logs, tree_name)
+    bp = blueprint()
+    for rid, log in plan:
+        rec = rr.RecordingStream(APP_ID, recording_id=rid)
+        try:
+            rec.spawn(default_blueprint=bp)
+        except Exception as exc:  # no display, no viewer binary
+            raise SmcError(
+                f"--spawn: cannot start Rerun's viewer ({exc}); use --save or --serve"
+            ) from None
+        rec.send_recording_name(rid)
+        _fill(rec, tree, log, warn)
+        rec.flush()
+    return [rid for rid, _ in plan]
+
+
+# --- serving ------------------------------------------------------------------------------
+
+
+def rerun_binary() -> str:
+    """Path of the ``rerun`` executable shipped with rerun-sdk (or ``RERUN_CLI_PATH``)."""
+    if os.environ.get("RERUN_CLI_PATH"):
+        return os.environ["RERUN_CLI_PATH"]
+    import rerun_cli
+
+    exe = Path(rerun_cli.__file__).parent / "rerun"
+    if not exe.is_file():
+        found = shutil.which("rerun")
+        if found is None:
+            raise SmcError(f"rerun binary not found at {exe} nor on PATH (reinstall rerun-sdk)")
+        return found
+    return str(exe)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _port_taken(port: int) -> bool:
+    with socket.socket() as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return True
+    return False
+
+
+def _stop(proc: subprocess.Popen[bytes]) -> None:
+    """Stop ``proc`` and its process group: SIGTERM, then SIGKILL after 5 s."""
+    if proc.poll() is not None:
+        return
+    for sig, wait in ((signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            break
+        try:
+            proc.wait(wait)
+            break
+        except subprocess.TimeoutExpired:
+            continue
+
+
+def serve_rrd(
+    rrd: Path,
+    *,
+    port: int,
+    on_message: Callable[[str], None] | None = None,
+    ready_timeout: float = 30.0,
+    until: Callable[[], bool] | None = None,
+) -> str:
+    """Serve ``rrd`` with Rerun's web viewer on 127.0.0.1:``port`` until Ctrl-C (or ``until()``).
+
+    Says the address (``on_message``); on Ctrl-C stops the viewer process (and its group)
+    it started.
+    """
+    if not 0 < port < 65536:
+        raise SmcError(f"--port {port}: expected 1-65535")
+    if _port_taken(port):
+        raise SmcError(f"--port {port}: 127.0.0.1:{port} is already in use")
+    grpc = _free_port()
+    cmd = [
+        rerun_binary(),
+        "--serve-web",
+        "--bind",
+        "127.0.0.1",
+        "--port",
+        str(grpc),
+        "--web-viewer-port",
+        str(port),
+        str(rrd),
+    ]
+    log_path = Path(rrd).with_suffix(".viewer.log")
+    # Ctrl-C must reach us: a shell's `cmd &` may start us with SIGINT ignored.
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    with open(log_path, "wb") as viewer_log:
+        proc = subprocess.Popen(
+            cmd,
+            stdin=subprocess.DEVNULL,
+            stdout=viewer_log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+        try:
+            url = f"http://127.0.0.1:{port}"
+            deadline = time.monotonic() + ready_timeout
+            while True:
+                if proc.poll() is not None:
+                    tail = log_path.read_text(errors="replace").strip().splitlines()
+                    raise SmcError(
+                        f"rerun web viewer exited with code {proc.returncode}"
+                        f" ({tail[-1] if tail else 'no output'})"
+                    )
+                try:
+                    with urllib.request.urlopen(url, timeout=1.0):
+                        break
+                except OSError:
+                    if time.monotonic() > deadline:
+                        raise SmcError(
+                            f"rerun web viewer did not answer on {url} within {ready_timeout:.0f} s"
+                        ) from None
+                    time.sleep(0.2)
+            proxy = urllib.parse.quote(f"rerun+http://127.0.0.1:{grpc}/proxy", safe="")
+            full = f"{url}/?url={proxy}"
+            if on_message is not None:
+                on_message(f"serving the Rerun web viewer at {full}  (Ctrl-C to stop)")
+            while proc.poll() is None and not (until is not None and until()):
+                time.sleep(0.2)
+            if proc.returncode not in (None, 0):
+                raise SmcError(f"rerun web viewer exited with code {proc.returncode}")
+            return full
+        except KeyboardInterrupt:
+            if on_message is not None:
+                on_message("stopping the web viewer")
+            return f"http://127.0.0.1:{port}"
+        finally:
+            _stop(proc)
+            signal.signal(signal.SIGINT, old)
+
+
+# --- blueprint ------------------------------------------------------------------------
+
+
+def blueprint() -> Any:
+    """Graph and time series on the left, 3D world, camera, depth and events on the right."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.GraphView(origin="/tree", name="SMC tree"),
+                rrb.TimeSeriesView(origin="/signals", name="signals"),
+                row_shares=[3, 2],
+            ),
+            rrb.Vertical(
+                rrb.Spatial3DView(origin="/world", name="world"),
+                rrb.Horizontal(
+                    rrb.Spatial2DView(
+                        origin="/world/camera", contents="$origin/image", name="camera"
+                    ),
+                    rrb.Spatial2DView(
+                        origin="/world/camera", contents="$origin/depth", name="depth"
+                    ),
+                    rrb.Tabs(
+                        rrb.TextLogView(origin="/events", name="events"),
+                        rrb.TextDocumentView(origin="/tree/smcs", name="SMCs"),
+                    ),
+                ),
+                row_shares=[3, 2],
+            ),
+            column_shares=[2, 3],
+        ),
+        rrb.TimePanel(timeline=TIMELINE),
+        collapse_panels=False,
+    )
+
+
+# --- colours and labels -----------------------------------------------------------------
+
+
+def _cluster_rgb(cluster: Any, tree: Tree) -> tuple[int, int, int]:
+    p = tree.params.perception
+    return dominant_rgb(cluster.histogram, p.hue_bins, p.sat_bins, p.val_bins)
+
+
+def _cluster_name(cluster: Any, tree: Tree) -> str:
+    return colour_name(_cluster_rgb(cluster, tree))
+
+
+def _sources_text(edge: Edge, limit: int = 3) -> str:
+    parts = [f"{s.log} {s.t0:.1f}-{s.t1:.1f} s" for s in edge.sources[:limit]]
+    if len(edge.sources) > limit:
+        parts.append(f"+{len(edge.sources) - limit} more")
+    return "; ".join(parts)
+
+
+def perception_text(edge: Edge, tree: Tree) -> str:
+    """Salient perceptions of an edge in a few words: object colour and size, weight."""
+    parts = []
+    c = edge.smc.perception.cluster
+    if c is not None:
+        ext = "x".join(f"{100 * e:.0f}" for e in c.extents)
+        parts.append(f"{_cluster_name(c, tree)} object {ext} cm")
+    w = edge.smc.perception.weight
+    if w is not None:
+        parts.append(f"weight {1000 * w:.0f} g")
+    return ", ".join(parts) or "no salient object"
+
+
+def edge_label(edge: Edge, tree: Tree) -> str:
+    """Graph label of an SMC: id, salient perceptions, gripper event, support, sources."""
+    return (
+        f"{edge.id}: {perception_text(edge, tree)}\n{edge.smc.action.event} · "
+        f"support {edge.support}\n{_sources_text(edge)}"
+    )
+
+
+def branch_colours(tree: Tree) -> dict[str, tuple[int, int, int]]:
+    """Edge id -> colour: a chain keeps its colour, each child of a fork starts a new one."""
+    out: dict[str, tuple[int, int, int]] = {}
+    k = 0
+    stack: list[tuple[str, tuple[int, int, int] | None]] = [(ROOT, None)]
+    while stack:
+        node, colour = stack.pop()
+        kids = tree.children(node)
+        for e in reversed(kids):
+            if colour is None or len(kids) > 1:
+                c = _PALETTE[k % len(_PALETTE)]
+                k += 1
+            else:
+                c = colour
+            out[e.id] = c
+            stack.append((e.child, c))
+    for e in tree.edges:  # unreachable edges (should not exist): still coloured
+        out.setdefault(e.id, _PALETTE[7])
+    return out
+
+
+def _layout(tree: Tree) -> dict[str, tuple[float, float]]:
+    """Tidy tree layout: depth down, leaves spread left to right [graph-view units]."""
+    pos: dict[str, tuple[float, float]] = {}
+    next_x = [0.0]
+
+    def place(node: str, depth: int) -> float:
+        kids = tree.children(node)
+        if not kids:
+            x = next_x[0]
+            next_x[0] += 260.0
+        else:
+            xs = [place(e.child, depth + 1) for e in kids]
+            x = (min(xs) + max(xs)) / 2
+        pos[node] = (x, 160.0 * depth)
+        return x
+
+    place(ROOT, 0)
+    for n in tree.nodes:  # nodes not under the root
+        if n not in pos:
+            pos[n] = (next_x[0], 0.0)
+            next_x[0] += 260.0
+    return pos
+
+
+# --- the tree ---------------------------------------------------------------------------
+
+
+def _yaw_quat(yaw: float) -> list[float]:
+    """Quaternion (x, y, z, w) of a rotation ``yaw`` about world z."""
+    return [0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)]
+
+
+def _boxes(
+    clusters: Sequence[Any], colours: Sequence[Any], labels: Sequence[str], radius: float
+) -> Any:
+    import rerun as rr
+
+    return rr.Boxes3D(
+        centers=[c.centroid for c in clusters],
+        half_sizes=[np.asarray(c.extents) / 2 for c in clusters],
+        quaternions=[rr.Quaternion(xyzw=_yaw_quat(float(c.yaw))) for c in clusters],
+        colors=colours,
+        labels=labels,
+        radii=radius,
+    )
+
+
+def log_tree(rec: Any, tree: Tree) -> None:
+    """The tree (static): graph at ``/tree``, actions under ``/world/actions``."""
+    import rerun as rr
+
+    from smccli.learn.dmp import rollout
+
+    pos = _layout(tree)
+    colours = branch_colours(tree)
+    depth_of = {ROOT: 0}
+    for e in tree.edges:
+        depth_of.setdefault(e.child, depth_of.get(e.parent, 0) + 1)
+    rec.log("/world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    rec.log(
+        "/tree",
+        rr.GraphNodes(
+            list(tree.nodes),
+            positions=[pos[n] for n in tree.nodes],
+            labels=[f"{n} (root)" if n == ROOT else n for n in tree.nodes],
+            colors=[_ROOT if n == ROOT else _NODE for n in tree.nodes],
+            radii=12.0,
+        ),
+        static=True,
+    )
+    rec.log(
+        "/tree",
+        rr.GraphEdges([(e.parent, e.child) for e in tree.edges], graph_type="directed"),
+        static=True,
+    )
+    if tree.edges:
+        swatch = [
+            (
+                _cluster_rgb(e.smc.perception.cluster, tree)
+                if e.smc.perception.cluster is not None
+                else colours[e.id]
+            )
+            for e in tree.edges
+        ]
+        mid = [
+            ((pos[e.parent][0] + pos[e.child][0]) / 2, (pos[e.parent][1] + pos[e.child][1]) / 2)
+            for e in tree.edges
+        ]
+        rec.log(
+            "/tree/labels",
+            rr.GraphNodes(
+                [e.id for e in tree.edges],
+                positions=mid,
+                colors=swatch,
+                labels=[edge_label(e, tree) for e in tree.edges],
+                radii=7.0,
+            ),
+            static=True,
+        )
+    rows = [
+        "| edge | parent → child | salient perceptions | event | goal | support | sources |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for e in tree.edges:
+        g = e.smc.action.goal
+        rows.append(
+            f"| {e.id} | {e.parent} → {e.child} | {perception_text(e, tree)} | "
+            f"{e.smc.action.event} | ({g[0]:+.3f}, {g[1]:+.3f}, {g[2]:+.3f}) "
+            f"{e.smc.action.goal_frame} | {e.support} | {_sources_text(e, 10)} |"
+        )
+    scene = tree.scene.get("name", "?")
+    head = (
+        f"# SMC tree, version {tree.version}\n\nscene {scene}, {len(tree.nodes)} nodes, "
+        f"{len(tree.edges)} SMCs\n\n"
+    )
+    rec.log(
+        "/tree/smcs",
+        rr.TextDocument(head + "\n".join(rows), media_type="text/markdown"),
+        static=True,
+    )
+    for e in tree.edges:
+        dmp = e.smc.action.dmp
+        _, y = rollout(dmp, start=dmp.start, goal=dmp.goal)
+        base = f"/world/actions/{e.id}"
+        rec.log(
+            base,
+            rr.LineStrips3D(
+                [y[:, :3]],
+                colors=[colours[e.id]],
+                radii=0.003,
+                labels=[f"{e.id} ({e.smc.action.event})"],
+            ),
+            static=True,
+        )
+        rec.log(
+            f"{base}/goal",
+            rr.Points3D([dmp.goal[:3]], colors=[colours[e.id]], radii=0.008),
+            static=True,
+        )
+        c = e.smc.perception.cluster
+        if c is not None:
+            rec.log(
+                f"{base}/object",
+                _boxes([c], [_cluster_rgb(c, tree)], [f"{e.id}: {_cluster_name(c, tree)}"], 0.001),
+                static=True,
+            )
+
+
+# --- a log --------------------------------------------------------------------------------
+
+
+def _frame_at(frames: Sequence[Any], t: float) -> Any:
+    if not frames:
+        return None
+    times = np.array([f.t for f in frames])
+    return frames[int(np.argmin(np.abs(times - t)))]
+
+
+def _poi_at(log: Any, t: float) -> np.ndarray | None:
+    if len(log.poi_t) == 0:
+        return None
+    return np.asarray(log.poi[int(np.argmin(np.abs(log.poi_t - t)))])
+
+
+def decision_points(log: Any, tree: Tree) -> list[tuple[float, float, str]]:
+    """(t0, t1, label) of the log's decision points.
+
+    Replays: the ``/smc/decision`` times (t1 = the next one or the end). Demonstrations:
+    the fragments compile would cut (marks snapped to gripper / weight edges); if that
+    fails, the operator marks themselves.
+    """
+    t_end = float(log.poi_t[-1]) if len(log.poi_t) else 0.0
+    if log.decisions:
+        ts = [float(d["t"]) for d in log.decisions]
+        return [
+            (t, ts[k + 1] if k + 1 < len(ts) else t_end, f"decision at {d.get('node')}")
+            for k, (t, d) in enumerate(zip(ts, log.decisions, strict=True))
+        ]
+    try:
+        from smccli.learn.compile import fragments
+
+        frags = fragments(log, tree.params)
+        return [(f.t0, f.t1, f"fragment {k + 1} (ends: {f.cause})") for k, f in enumerate(frags)]
+    except Exception:  # a log compile would refuse still shows, cut at its marks
+        t0 = float(log.poi_t[0]) if len(log.poi_t) else 0.0
+        bounds = [t0, *sorted(m.t for m in log.marks), t_end]
+        pairs = zip(bounds[:-1], bounds[1:], strict=True)
+        return [(a, b, f"fragment {k + 1}") for k, (a, b) in enumerate(pairs) if b > a]
+
+
+def log_log(
+    rec: Any,
+    log: Any,
+    tree: Tree,
+    *,
+    warn: Callable[[str], None] = lambda m: None,
+    perception: bool = True,
+) -> None:
+    """A demonstration or replay log on the ``time`` timeline (see the module docstring)."""
+    import rerun as rr
+
+    name = Path(log.path).name
+    tcol = rr.TimeColumn
+    # POI: path taken (static), moving point and coordinates over time.
+    if len(log.poi_t):
+        rec.log(
+            "/world/poi/path",
+            rr.LineStrips3D(
+                [log.poi[:, :3]],
+                colors=[(240, 240, 240)],
+                radii=0.002,
+                labels=[f"{name}: path taken"],
+            ),
+            static=True,
+        )
+        n = len(log.poi_t)
+        times = [tcol(TIMELINE, duration=log.poi_t)]
+        rec.send_columns(
+            "/world/poi",
+            indexes=times,
+            columns=rr.Points3D.columns(
+                positions=log.poi[:, :3], radii=np.full(n, 0.01), colors=np.tile(_HIGHLIGHT, (n, 1))
+            ),
+        )
+        for i, axis in enumerate(("x", "y", "z", "yaw")):
+            rec.send_columns(
+                f"/signals/poi/{axis}",
+                indexes=times,
+                columns=rr.Scalars.columns(scalars=log.poi[:, i]),
+            )
+        if n > 1:
+            dt = np.diff(log.poi_t)
+            step = np.linalg.norm(np.diff(log.poi[:, :3], axis=0), axis=1)
+            speed = step / np.where(dt > 0, dt, np.inf)
+            rec.send_columns(
+                "/signals/poi/speed",
+                indexes=[tcol(TIMELINE, duration=log.poi_t[1:])],
+                columns=rr.Scalars.columns(scalars=speed),
+            )
+    if len(log.weight_t):
+        rec.send_columns(
+            "/signals/weight",
+            indexes=[tcol(TIMELINE, duration=log.weight_t)],
+            columns=rr.Scalars.columns(scalars=log.weight),
+        )
+    if log.commands:
+        ct = np.array([c.t for c in log.commands])
+        rec.send_columns(
+            "/signals/gripper",
+            indexes=[tcol(TIMELINE, duration=ct)],
+            columns=rr.Scalars.columns(scalars=[c.gripper for c in log.commands]),
+        )
+    _log_camera(rec, log)
+    for pc in log.point_clouds:
+        rec.set_time(TIMELINE, duration=pc.t)
+        pts, cols = _subsample(np.asarray(pc.points), pc.colors)
+        rec.log("/world/perception/points", rr.Points3D(pts, colors=cols, radii=0.002))
+    # Events: one TextLog per saliency mark, per fragment, per decision.
+    for m in log.marks:
+        rec.set_time(TIMELINE, duration=m.t)
+        rec.log(
+            "/events/saliency",
+            rr.TextLog(
+                f"saliency mark ({m.source}) {m.label}".strip(), level="INFO", color=_HIGHLIGHT
+            ),
+        )
+    points = decision_points(log, tree)
+    if not log.decisions:
+        for t0, t1, label in points:
+            rec.set_time(TIMELINE, duration=t0)
+            rec.log("/events/fragments", rr.TextLog(f"{label}: {t0:.2f}-{t1:.2f} s", level="DEBUG"))
+    _log_decisions(rec, log, tree, warn)
+    if perception:
+        _log_perception(rec, log, tree, points, warn)
+
+
+def _subsample(
+    points: np.ndarray, colors: np.ndarray | None, n: int = MAX_CLOUD_POINTS
+) -> tuple[np.ndarray, np.ndarray | None]:
+    if len(points) <= n:
+        return points, colors
+    idx = np.random.default_rng(0).choice(len(points), n, replace=False)
+    idx.sort()
+    return points[idx], None if colors is None else np.asarray(colors)[idx]
+
+
+def _log_camera(rec: Any, log: Any) -> None:
+    import rerun as rr
+
+    if not log.frames:
+        return
+    f0 = log.frames[0]
+    moving = any(not np.allclose(f.T_world_camera, f0.T_world_camera) for f in log.frames)
+    h, w = f0.depth.shape
+
+    def pose(f: Any) -> Any:
+        return rr.Transform3D(translation=f.T_world_camera[:3, 3], mat3x3=f.T_world_camera[:3, :3])
+
+    rec.log(
+        "/world/camera",
+        rr.Pinhole(
+            image_from_camera=f0.K,
+            resolution=[w, h],
+            camera_xyz=rr.ViewCoordinates.RDF,
+            image_plane_distance=0.15,
+        ),
+        static=True,
+    )
+    if not moving:
+        rec.log("/world/camera", pose(f0), static=True)
+    for f in log.frames:
+        rec.set_time(TIMELINE, duration=f.t)
+        if moving:
+            rec.log("/world/camera", pose(f))
+        rec.log("/world/camera/image", rr.Image(f.rgb).compress(jpeg_quality=85))
+        depth = np.nan_to_num(np.asarray(f.depth, dtype=np.float32), posinf=0.0, neginf=0.0)
+        mm = np.clip(depth * 1000.0, 0, 65535).astype(np.uint16)
+        rec.log("/world/camera/depth", rr.DepthImage(mm, meter=1000.0, colormap="turbo"))
+
+
+def _log_decisions(rec: Any, log: Any, tree: Tree, warn: Callable[[str], None]) -> None:
+    """Replay decisions: a TextLog each, distances as scalars, mapped goal and planned path."""
+    import rerun as rr
+
+    from smccli.learn.dmp import rollout
+
+    edges = {e.id: e for e in tree.edges}
+    colours = branch_colours(tree)
+    name = Path(log.path).name
+    for d in log.decisions:
+        t = float(d["t"])
+        rec.set_time(TIMELINE, duration=t)
+        cands = d.get("candidates") or []
+        parts = []
+        for c in cands:
+            dp = c.get("d_p")
+            parts.append(
+                f"{c.get('edge')} d_p={'-' if dp is None else f'{dp:.3f}'}"
+                f"{' contingent' if c.get('contingent') else ''}"
+            )
+            if dp is not None:
+                rec.log(f"/signals/decision/d_p/{c.get('edge')}", rr.Scalars(float(dp)))
+        chosen = d.get("chosen")
+        text = f"node {d.get('node')}: chose {chosen if chosen is not None else 'none'} | " + (
+            "; ".join(parts) or "no candidates"
+        )
+        rec.log("/events/decisions", rr.TextLog(text, level="INFO" if chosen else "WARN"))
+        goal = d.get("mapped_goal")
+        if chosen is None or goal is None:
+            rec.log("/world/decisions/goal", rr.Clear(recursive=False))
+            rec.log("/world/decisions/planned", rr.Clear(recursive=False))
+            continue
+        colour = colours.get(str(chosen), _HIGHLIGHT)
+        goal = np.asarray(goal, dtype=float)
+        rec.log(
+            "/world/decisions/goal",
+            rr.Points3D([goal[:3]], colors=[colour], radii=0.012, labels=[f"goal of {chosen}"]),
+        )
+        edge = edges.get(str(chosen))
+        start = _poi_at(log, t)
+        if edge is None:
+            warn(f"{name}: decision at t={t:.2f} s chose {chosen}, not an edge of this tree")
+            continue
+        if start is None or goal.shape != edge.smc.action.dmp.start.shape:
+            continue
+        _, y = rollout(
+            edge.smc.action.dmp,
+            start=start,
+            goal=goal,
+            duration=float(d.get("duration") or edge.smc.action.dmp.duration),
+        )
+        rec.log(
+            "/world/decisions/planned",
+            rr.LineStrips3D([y[:, :3]], colors=[colour], radii=0.004, labels=[f"{chosen} planned"]),
+        )
+
+
+def _log_perception(
+    rec: Any,
+    log: Any,
+    tree: Tree,
+    points: Sequence[tuple[float, float, str]],
+    warn: Callable[[str], None],
+) -> None:
+    """Point cloud, clusters and the salient cluster recomputed at each decision point."""
+    import rerun as rr
+
+    from smccli.perception import cloud_from_frame, clusters_from_frame, salient_cluster
+
+    name = Path(log.path).name
+    if not log.frames or not points:
+        return
+    robot = None
+    try:
+        from smccli.logs.robot import geometry_at, robot_model_of
+
+        if log.joint_states:
+            robot = robot_model_of(log)
+    except (SmcError, ValueError, KeyError, Exception) as exc:  # noqa: B014
+        warn(f"{name}: no self-filter for the point clouds ({str(exc).splitlines()[0]})")
+    pp = tree.params.perception
+    for k, (t0, t1, label) in enumerate(points):
+        frame = _frame_at(log.frames, t0)
+        geom = geometry_at(robot, log, frame.t) if robot is not None else None
+        try:
+            pts, cols = cloud_from_frame(frame, geom, pp)
+            clusters = clusters_from_frame(frame, geom, pp)
+        except (ValueError, RuntimeError, LogError) as exc:
+            warn(f"{name}: perception failed at t={t0:.2f} s ({str(exc).splitlines()[0]})")
+            continue
+        rec.set_time(TIMELINE, duration=t0)
+        shown, shown_cols = _subsample(pts, cols)
+        rec.log("/world/decisions/cloud", rr.Points3D(shown, colors=shown_cols, radii=0.0015))
+        if clusters:
+            rec.log(
+                "/world/decisions/clusters",
+                _boxes(
+                    clusters,
+                    [_cluster_rgb(c, tree) for c in clusters],
+                    [f"{_cluster_name(c, tree)} #{i}" for i, c in enumerate(clusters)],
+                    0.002,
+                ),
+            )
+        else:
+            rec.log("/world/decisions/clusters", rr.Clear(recursive=False))
+        idx = None
+        if log.decisions and k < len(log.decisions):
+            d = log.decisions[k]
+            chosen = [c for c in d.get("candidates") or [] if c.get("edge") == d.get("chosen")]
+            if chosen and isinstance(chosen[0].get("cluster"), int):
+                idx = chosen[0]["cluster"] if chosen[0]["cluster"] < len(clusters) else None
+        if idx is None:
+            poi_end = _poi_at(log, t1)
+            if poi_end is not None:
+                idx = salient_cluster(clusters, poi_end[:3], tree.params.epsilon)
+        if idx is None:
+            rec.log("/world/decisions/salient", rr.Clear(recursive=False))
+            text = f"{label}: {len(clusters)} cluster(s), none salient"
+        else:
+            c = clusters[idx]
+            rec.log(
+                "/world/decisions/salient",
+                _boxes([c], [_HIGHLIGHT], [f"salient: {_cluster_name(c, tree)} #{idx}"], 0.005),
+            )
+            text = f"{label}: {len(clusters)} cluster(s), salient #{idx} {_cluster_name(c, tree)}"
+        rec.log("/events/perception", rr.TextLog(text, level="DEBUG"))
+
+
+# --- headless previews (docs) -------------------------------------------------------------
+
+
+def save_previews(tree: Tree, log: Any | None, out_dir: Path) -> list[Path]:
+    """PNG renderings (matplotlib, no display) of the views the blueprint lays out, from the
+    same data as the recording: ``tree.png``, ``world.png`` and, with a log,
+    ``camera.png`` and ``signals.png``. For the docs; returns the files written."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from smccli.learn.dmp import rollout
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    pos, colours = _layout(tree), branch_colours(tree)
+    fig, ax = plt.subplots(figsize=(9, 6))
+    for e in tree.edges:
+        (x0, y0), (x1, y1) = pos[e.parent], pos[e.child]
+        ax.annotate(
+            "", (x1, -y1), (x0, -y0), arrowprops={"arrowstyle": "->", "lw": 1.5, "color": "0.4"}
+        )
+        c = e.smc.perception.cluster
+        sw = _cluster_rgb(c, tree) if c is not None else colours[e.id]
+        mx, my = (x0 + x1) / 2, -(y0 + y1) / 2
+        ax.scatter([mx], [my], s=120, color=np.array(sw) / 255, edgecolors="k", zorder=3)
+        ax.text(mx + 12, my, edge_label(e, tree), fontsize=7, va="center")
+    for n in tree.nodes:
+        x, y = pos[n]
+        ax.scatter([x], [-y], s=260, color=np.array(_ROOT if n == ROOT else _NODE) / 255, zorder=4)
+        ax.text(x, -y + 22, n, ha="center", fontsize=9, weight="bold")
+    ax.set_title("/tree: decision points and SMCs")
+    ax.axis("off")
+    ax.margins(0.25, 0.15)
+    written.append(out_dir / "tree.png")
+    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+    fig = plt.figure(figsize=(8, 6))
+    ax3 = fig.add_subplot(projection="3d")
+    for e in tree.edges:
+        dmp = e.smc.action.dmp
+        _, path = rollout(dmp, start=dmp.start, goal=dmp.goal)
+        ax3.plot(*path[:, :3].T, color=np.array(colours[e.id]) / 255, lw=2, label=e.id)
+        ax3.scatter(*dmp.goal[:3], color=np.array(colours[e.id]) / 255, s=25)
+        c = e.smc.perception.cluster
+        if c is not None:
+            ax3.scatter(
+                *c.centroid,
+                color=np.array(_cluster_rgb(c, tree)) / 255,
+                s=120,
+                marker="s",
+                edgecolors="k",
+            )
+    if log is not None and len(log.poi_t):
+        ax3.plot(*log.poi[:, :3].T, color="0.3", lw=1, ls="--", label="POI path taken")
+    ax3.set_xlabel("x [m]")
+    ax3.set_ylabel("y [m]")
+    ax3.set_zlabel("z [m]")
+    ax3.legend(fontsize=7, loc="upper left")
+    ax3.set_title("/world/actions/<edge> (coloured by branch) and /world/poi/path")
+    written.append(out_dir / "world.png")
+    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    if log is None:
+        return written
+
+    points = decision_points(log, tree)
+    if log.frames:
+        t0 = points[0][0] if points else log.frames[0].t
+        frame = _frame_at(log.frames, t0)
+        fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8))
+        a1.imshow(frame.rgb)
+        a1.set_title(f"/world/camera/image  t={frame.t:.2f} s")
+        d = np.where(np.isfinite(frame.depth) & (frame.depth > 0), frame.depth, np.nan)
+        im = a2.imshow(d, cmap="turbo")
+        fig.colorbar(im, ax=a2, label="depth [m]")
+        a2.set_title("/world/camera/depth")
+        for a in (a1, a2):
+            a.axis("off")
+        written.append(out_dir / "camera.png")
+        fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+        plt.close(fig)
+
+    fig, axes = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
+    for i, axis in enumerate(("x", "y", "z")):
+        axes[0].plot(log.poi_t, log.poi[:, i], label=f"/signals/poi/{axis}")
+    if log.commands:
+        axes[1].plot(
+            [c.t for c in log.commands], [c.gripper for c in log.commands], label="/signals/gripper"
+        )
+    if len(log.weight_t):
+        axes[1].plot(log.weight_t, log.weight, label="/signals/weight [kg]")
+    for a in axes:
+        for m in log.marks:
+            a.axvline(m.t, color="goldenrod", ls="--", lw=1)
+        for d in log.decisions:
+            a.axvline(float(d["t"]), color="purple", ls=":", lw=1)
+        a.legend(fontsize=7, loc="upper right")
+    axes[0].set_title("/signals (dashed: /events/saliency marks, dotted: decisions)")
+    axes[1].set_xlabel("time [s]")
+    written.append(out_dir / "signals.png")
+    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return written

@@ -1,0 +1,341 @@
+"""``smc compile``: demonstration logs -> SMC chains -> the tree (paper 3.1-3.8, Algorithm 1).
+
+Per log, in order: read -> temporal saliency (fragments) -> perception saliency ->
+action saliency -> SMCs; then Algorithm 1 inserts the chain into the tree. Compile only
+perceives through the logged sensors (camera, scale, the robot's own joints for the
+self-filter); ``/sim/ground_truth`` is never read.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from filelock import FileLock, Timeout
+
+from smccli import __version__
+from smccli.errors import LogError, TreeError
+from smccli.learn.params import SmcParams, params_to_dict, with_overrides
+from smccli.learn.segmentation import Fragment, SegmentMode, segment, trace_from_commands
+from smccli.learn.smc import Action, SalientPerceptions, Smc, Source, action_from_path
+from smccli.learn.tree import FORMAT, Tree, insert_chain, load_tree, save_tree
+from smccli.logs import Log, read_log
+from smccli.logs.robot import geometry_at, robot_model_of
+from smccli.outputs import check_output
+from smccli.perception import Cluster, clusters_from_frame, salient_cluster, scale_reading
+from smccli.world.robot import Robot
+from smccli.world.scene import Scene, robot_identity, scene_of_log, sensor_identity
+from smccli.world.sensors import CameraFrame
+
+#: Topics every arm log must hold for compile.
+REQUIRED_TOPICS = {
+    "/teleop/command",
+    "/robot/poi",
+    "/robot/joint_states",
+    "/camera/color",
+    "/camera/depth",
+    "/camera/calibration",
+}
+#: Topics compile reads; the ground truth is deliberately not among them.
+READ_TOPICS = REQUIRED_TOPICS | {"/tf", "/scale/weight", "/saliency"}
+
+
+@dataclass(frozen=True, slots=True)
+class Chain:
+    """The SMCs extracted from one log, in time order."""
+
+    log: Path
+    """The log file."""
+    sha256: str
+    """Its sha256 (hex)."""
+    fragments: tuple[Fragment, ...]
+    """Temporal saliency: the fragments."""
+    smcs: tuple[Smc, ...]
+    """One SMC per fragment."""
+    warnings: tuple[str, ...]
+    """One-line warnings (truncated log, no boundary, no salient object...)."""
+
+
+@dataclass(frozen=True, slots=True)
+class CompileResult:
+    """What a compile did."""
+
+    tree: Tree
+    """The tree after the compile (written to disk unless unchanged)."""
+    added: tuple[Chain, ...]
+    """Logs inserted by this compile."""
+    skipped: tuple[Path, ...]
+    """Logs already in the tree."""
+    changed: bool
+    """Whether the file was rewritten (version grew)."""
+
+
+def _frame_at(frames: Sequence[CameraFrame], t: float) -> CameraFrame | None:
+    """First camera frame at or after ``t`` (within 0.2 s), else the last one before."""
+    after = [f for f in frames if f.t >= t - 1e-6]
+    if after and after[0].t - t <= 0.2:
+        return after[0]
+    before = [f for f in frames if f.t < t]
+    return before[-1] if before else (after[0] if after else None)
+
+
+def _finger_speed(log: Log, fingers: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Largest speed of the gripper joints ``fingers`` over time, for settling the gripper
+    edges."""
+    t = np.array([js.t for js in log.joint_states], dtype=float)
+    if not log.joint_states:
+        return t, np.zeros(0)
+    names = log.joint_states[0].names
+    idx = [i for i, n in enumerate(names) if n in fingers]
+    if not idx:
+        return t, np.zeros(len(t))
+    vel = np.array([np.abs(js.velocity[idx]).max() for js in log.joint_states])
+    return t, vel
+
+
+def fragments(
+    log: Log,
+    params: SmcParams,
+    mode: SegmentMode = SegmentMode.markers,
+    robot: Robot | None = None,
+) -> list[Fragment]:
+    """Temporal saliency (3.1) of a log: its fragments, as compile cuts them. ``robot``:
+    the log's (default: read from its attachments)."""
+    robot = robot or scene_of_log(log.attachments, log.path).robot
+    t_end = float(log.poi_t[-1]) if len(log.poi_t) else 0.0
+    t_f, v_f = _finger_speed(log, robot.gripper.joints)
+    marks = tuple(m.t for m in log.marks if m.source == "operator")
+    trace = trace_from_commands(log.commands, t_f, v_f, log.weight_t, log.weight, marks, t_end)
+    return segment(
+        trace,
+        mode,
+        snap_window=params.snap_window,
+        min_fragment=params.min_fragment,
+        auto_gap=params.auto_gap,
+    )
+
+
+def extract_chain(
+    log: Log, params: SmcParams, mode: SegmentMode, scene: Scene | None = None
+) -> Chain:
+    """Temporal, perception and action saliency of one log -> its SMC chain (eq. 40-42).
+    ``scene``: the log's (default: rebuilt from its attachments)."""
+    warnings: list[str] = []
+    name = log.path.name
+    scene = scene or scene_of_log(log.attachments, log.path)
+    if mode is SegmentMode.markers and not any(m.source == "operator" for m in log.marks):
+        warnings.append(
+            f"{name}: no saliency marks; the whole log is one fragment (try --segment auto)"
+        )
+    frags = fragments(log, params, mode, scene.robot)
+    if log.truncated or log.interrupted:
+        # Only what a boundary closed is a whole fragment: the rest was cut mid-action.
+        how = "truncated" if log.truncated else f"interrupted ({log.end.get('reason', '?')})"
+        t_end = float(log.poi_t[-1]) if len(log.poi_t) else 0.0
+        if frags[-1].cause == "end":
+            raise LogError(
+                f"{log.path}: {how} at t={t_end:.1f} s before its first fragment "
+                "boundary; no complete fragment to compile"
+            )
+        warnings.append(
+            f"{name}: {how} at t={t_end:.1f} s; compiled {len(frags)} complete "
+            f"fragment(s) up to t={frags[-1].t1:.1f} s, dropped the last "
+            f"{t_end - frags[-1].t1:.1f} s"
+        )
+    robot = robot_model_of(log)
+    has_scale = len(log.weight) > 0
+    smcs: list[Smc] = []
+    held = 0.0  # symmetry of the object in the hand: nothing yet
+    for k, frag in enumerate(frags):
+        frame = _frame_at(log.frames, frag.t0)
+        if frame is None:
+            raise LogError(f"{name}: no camera frame near t={frag.t0:.2f} s")
+        clusters = clusters_from_frame(frame, geometry_at(robot, log, frame.t), params.perception)
+        poi_end = log.poi[int(np.argmin(np.abs(log.poi_t - frag.t1)))]
+        idx = salient_cluster(clusters, poi_end[:3], params.epsilon)
+        cluster = None if idx is None else clusters[idx]
+        weight = None
+        if has_scale:
+            weight = scale_reading(log.weight_t, log.weight, frag.t0, params.weight_window)
+        action = _action(log, frag, cluster, held, params)
+        if action.event == "close":  # what the hand holds from here on
+            held = cluster.yaw_period if cluster is not None else 0.0
+        elif action.event == "open":
+            held = 0.0
+        if cluster is None and action.event != "none":
+            warnings.append(
+                f"{name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends "
+                f"with no object within {params.epsilon} m of the POI; its goal "
+                "is stored in the world frame"
+            )
+        smcs.append(
+            Smc(perception=SalientPerceptions(cluster=cluster, weight=weight), action=action)
+        )
+    return Chain(
+        log=log.path,
+        sha256=log.sha256,
+        fragments=tuple(frags),
+        smcs=tuple(smcs),
+        warnings=tuple(warnings),
+    )
+
+
+def _action(
+    log: Log, frag: Fragment, cluster: Cluster | None, held_symmetry: float, params: SmcParams
+) -> Action:
+    """Action saliency (3.4): the commanded POI path over the fragment as a DMP, its goal
+    and approach in the salient object's frame; ``held_symmetry`` is that of the object in
+    the hand (see :class:`smccli.learn.smc.Action`)."""
+    cmds = [c for c in log.commands if frag.t0 - 1e-6 <= c.t <= frag.t1 + 1e-6]
+    if len(cmds) < 3:
+        raise LogError(
+            f"{log.path.name}: fragment {frag.t0:.2f}-{frag.t1:.2f} s holds fewer "
+            "than 3 operator commands"
+        )
+    t = np.array([c.t for c in cmds]) - cmds[0].t
+    path = np.array([c.target for c in cmds], dtype=float)
+    grip = np.array([c.gripper for c in cmds])
+    return action_from_path(t, path, grip, cluster, params, held_symmetry=held_symmetry)
+
+
+def _required_topics(log: Log) -> set[str]:
+    needed = set(REQUIRED_TOPICS)
+    if log.metadata.get("has_scale") == "true":
+        needed.add("/scale/weight")
+    return needed
+
+
+def _rebuild_base(out: Path) -> tuple[int, tuple[dict, ...]]:
+    """Version and history of the tree a ``--rebuild`` replaces. Its contents are discarded,
+    so a tree an older smc wrote (another schema) is fine; a file that is no smc tree at
+    all is refused, never replaced."""
+    try:
+        old = load_tree(out)
+        return old.version, old.history
+    except TreeError:
+        try:
+            doc = json.loads(out.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError):
+            doc = None
+        if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+            raise
+        version, history = doc.get("version"), doc.get("history")
+        if not (isinstance(version, int) and isinstance(history, list)):
+            return 0, ()
+        return version, tuple(h for h in history if isinstance(h, dict))
+
+
+def compile_logs(
+    logs: Sequence[Path],
+    out: Path,
+    *,
+    segment_mode: SegmentMode = SegmentMode.markers,
+    rebuild: bool = False,
+    overrides: Sequence[str] = (),
+    on_progress: Callable[[Path, str], None] | None = None,
+    on_warning: Callable[[str], None] | None = None,
+) -> CompileResult:
+    """Add the logs to the tree at ``out`` (created if absent) and write it atomically.
+
+    A log already in the tree is skipped. Parameters that differ from the tree's are
+    refused unless ``rebuild``. Any bad log aborts the compile before the file is touched.
+    """
+    # The tree is updated in place by design (Algorithm 1 is incremental); what must hold
+    # before reading any log is that it can be written at all.
+    out = check_output(out, force=True)
+    warn = on_warning or (lambda msg: None)
+    lock = FileLock(str(out) + ".lock")
+    try:
+        lock.acquire(timeout=60)
+    except Timeout:
+        raise TreeError(f"{out}: locked by another compile ({out}.lock)") from None
+    try:
+        if out.exists() and not rebuild:
+            tree = load_tree(out)
+            wanted = with_overrides(tree.params, list(overrides))
+            if params_to_dict(wanted) != params_to_dict(tree.params):
+                raise TreeError(
+                    f"{out}: --set {' '.join(overrides)} differs from the tree's "
+                    "parameters; use --rebuild to start afresh"
+                )
+        else:
+            # A rebuild starts a new tree but keeps the version growing and the history.
+            version, history = _rebuild_base(out) if out.exists() else (0, ())
+            tree = Tree(
+                params=with_overrides(SmcParams(), list(overrides)),
+                version=version,
+                history=history,
+            )
+        known = tree.log_digests()
+        added: list[Chain] = []
+        skipped: list[Path] = []
+        for path in logs:
+            path = Path(path)
+            if on_progress:
+                on_progress(path, "reading")
+            log = read_log(path, topics=READ_TOPICS, on_warning=warn)
+            missing = sorted(
+                _required_topics(log) - {t for t, n in log.topic_counts.items() if n > 0}
+            )
+            if missing:
+                raise LogError(
+                    f"{path}: topic {missing[0]} missing (scene "
+                    f"{log.metadata.get('scene', '?')} needs it)"
+                )
+            if log.sha256 in known or any(c.sha256 == log.sha256 for c in added):
+                skipped.append(path)
+                continue
+            scene = scene_of_log(log.attachments, path)
+            model = scene.model()
+            robot = robot_identity(scene, model)
+            if tree.robot and tree.robot != robot:
+                raise LogError(
+                    f"{path}: recorded with robot {robot['name']!r} "
+                    f"(kinematics {robot['kinematics'][7:19]}), the tree was taught on "
+                    f"{tree.robot.get('name')!r} ({str(tree.robot.get('kinematics'))[7:19]})"
+                )
+            if tree.scene and log.metadata.get("scene") not in (None, tree.scene.get("name")):
+                raise LogError(
+                    f"{path}: scene {log.metadata.get('scene')!r} differs from the "
+                    f"tree's scene {tree.scene.get('name')!r}"
+                )
+            if on_progress:
+                on_progress(path, "extracting")
+            chain = extract_chain(log, tree.params, segment_mode, scene)
+            for w in chain.warnings:
+                warn(w)
+            sources = [
+                Source(log=path.name, sha256=log.sha256, t0=f.t0, t1=f.t1) for f in chain.fragments
+            ]
+            tree = insert_chain(tree, chain.smcs, sources)
+            if not tree.scene:
+                tree = replace(
+                    tree,
+                    scene={
+                        "name": log.metadata.get("scene", ""),
+                        "digest": log.metadata.get("scene_digest", ""),
+                        "log": log.sha256,
+                        "sensors": sensor_identity(scene, model),
+                    },
+                    robot=robot,
+                )
+            added.append(chain)
+        if not added:
+            return CompileResult(tree=tree, added=(), skipped=tuple(skipped), changed=False)
+        entry = {
+            "version": tree.version + 1,
+            "time": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+            "smc_version": __version__,
+            "logs": [
+                {"name": c.log.name, "sha256": c.sha256, "fragments": len(c.smcs)} for c in added
+            ],
+        }
+        tree = replace(tree, version=tree.version + 1, history=(*tree.history, entry))
+        save_tree(tree, out)
+        return CompileResult(tree=tree, added=tuple(added), skipped=tuple(skipped), changed=True)
+    finally:
+        lock.release()

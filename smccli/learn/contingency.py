@@ -1,0 +1,206 @@
+"""Distances and contingency relations (paper 3.3-3.5, eq. 26, 29, 31, 36) and SMC merging.
+
+D_P sums per-sensor distances, each normalised so that 1 means "clearly different":
+clusters by :func:`smccli.perception.d_cluster`, the scale by |dw| / ``weight_scale``.
+Perception sets of different kinds (a cluster on one side only) are never contingent.
+
+D_A is physical, in metres: the distance between the two goals in the salient object's
+frame (position, plus ``yaw_scale`` metres per radian of yaw) plus the RMS distance of the
+two approaches (the paths' last ``approach_length`` metres, relative to the goal), both
+taken at the object's symmetric equivalent that fits best. The paper's T_hA = 0.02 then
+reads "the same goal relative to the object, reached the same way, within 2 cm", whatever
+the layout the demonstrations started from (docs/choices.md). Actions with different
+gripper events or goal frames are never contingent (D_A = inf).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from smccli.learn import dmp as dmp_mod
+from smccli.learn.params import SmcParams
+from smccli.learn.smc import (
+    TWO_PI,
+    Action,
+    SalientPerceptions,
+    Smc,
+    common_symmetry,
+    rotate_z,
+    symmetry_rotations,
+    wrap_angle,
+)
+from smccli.perception import Cluster, d_cluster
+
+INF = math.inf
+
+
+def d_p(a: SalientPerceptions, b: SalientPerceptions, params: SmcParams) -> float:
+    """Inter-perception distance D_P between two salient sets (eq. 26)."""
+    total = 0.0
+    if (a.cluster is None) != (b.cluster is None):
+        return INF
+    if a.cluster is not None and b.cluster is not None:
+        total += d_cluster(a.cluster, b.cluster, params.perception)
+    if (a.weight is None) != (b.weight is None):
+        return INF
+    if a.weight is not None and b.weight is not None:
+        total += abs(a.weight - b.weight) / params.weight_scale
+    return total
+
+
+@dataclass(frozen=True, slots=True)
+class Alignment:
+    """How two goals compare once the object's symmetry is taken out (part of eq. 29)."""
+
+    goal: float
+    """Goal distance [m]: position + ``yaw_scale`` per radian of yaw (modulo the gripper's pi
+    unless the object has no symmetry)."""
+    approach: float
+    """RMS distance of the two approaches [m] (0 when either has none)."""
+    rotation: float
+    """The rotation of ``b``'s object frame [rad] that gives the least total."""
+
+    @property
+    def total(self) -> float:
+        return self.goal + self.approach
+
+
+def align(a: Action, b: Action, params: SmcParams) -> Alignment:
+    """Compare ``b`` to ``a`` over the rotations that map their (common) object symmetry
+    onto itself, and keep the best: a square cube grasped at +44 degrees and at -44 degrees
+    is the same grasp, seen from a frame that turned by pi/2."""
+    symmetry = common_symmetry(a.symmetry, b.symmetry)
+    # The parallel gripper's pi is free, except around an object that has no symmetry:
+    # there the wrist's pi would put the object's other side in the hand.
+    yaw_period = TWO_PI if symmetry >= TWO_PI - 1e-6 else math.pi
+    n = min(len(a.approach), len(b.approach))
+    best: Alignment | None = None
+    for theta in symmetry_rotations(symmetry):
+        pos = rotate_z(b.goal[:3], theta)
+        goal = float(np.linalg.norm(a.goal[:3] - pos))
+        dyaw = wrap_angle(float(a.goal[3] - b.goal[3] - theta), yaw_period)
+        goal += params.yaw_scale * abs(dyaw)
+        approach = 0.0
+        if n:
+            gap = a.approach[:n] - rotate_z(b.approach[:n], theta)
+            approach = float(np.sqrt(np.mean(np.sum(gap**2, axis=1))))
+        if best is None or goal + approach < best.total - 1e-12:
+            best = Alignment(goal=goal, approach=approach, rotation=float(theta))
+    assert best is not None
+    return best
+
+
+def d_a(a: Action, b: Action, params: SmcParams) -> float:
+    """Inter-action distance D_A (eq. 29) [m]; inf for different gripper events or frames.
+
+    The goal relative to the salient perception and the approach to it, compared over the
+    object's symmetric equivalents (:func:`align`); where the action started and how it
+    travelled there (which follow from the layout, not from the action) do not count.
+    """
+    if a.event != b.event or a.goal_frame != b.goal_frame:
+        return INF
+    return align(a, b, params).total
+
+
+def c_f(a: Smc, b: Smc, params: SmcParams) -> bool:
+    """Fragment contingency C_F (eq. 31)."""
+    return (
+        d_a(a.action, b.action, params) < params.t_ha
+        and d_p(a.perception, b.perception, params) < params.t_hp
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class Match:
+    """How well the current context matches one stored SMC (eq. 36, 39)."""
+
+    d_p: float
+    """D_P between the context's best-matching salient perceptions and the SMC's."""
+    cluster_index: int | None
+    """Index of the context cluster chosen as the SMC's localized perception (eq. 39)."""
+    contingent: bool
+    """C_Now: d_p < T_hP (eq. 36)."""
+
+
+def match_context(
+    stored: SalientPerceptions, clusters: Sequence[Cluster], weight: float | None, params: SmcParams
+) -> Match:
+    """C_Now of a context (clusters seen now, scale reading now) against a stored SMC.
+
+    The context's salient localized perception is the cluster nearest the stored one in
+    perception (eq. 39): at a decision point the POI has not moved yet, so nearness to it
+    cannot choose.
+    """
+    total = 0.0
+    index: int | None = None
+    if stored.cluster is not None:
+        if not clusters:
+            return Match(d_p=INF, cluster_index=None, contingent=False)
+        dists = [d_cluster(c, stored.cluster, params.perception) for c in clusters]
+        index = int(np.argmin(dists))
+        total += dists[index]
+    if stored.weight is not None:
+        if weight is None:
+            return Match(d_p=INF, cluster_index=index, contingent=False)
+        total += abs(weight - stored.weight) / params.weight_scale
+    return Match(d_p=total, cluster_index=index, contingent=total < params.t_hp)
+
+
+def _mean_cluster(a: Cluster, b: Cluster, wa: float, wb: float) -> Cluster:
+    hist = (wa * a.histogram + wb * b.histogram) / (wa + wb)
+    hist = hist / max(float(hist.sum()), 1e-12)
+    period = a.yaw_period if a.yaw_period > 0 else 2 * math.pi
+    yaw = a.yaw + wb / (wa + wb) * wrap_angle(b.yaw - a.yaw, period)
+    return dataclasses.replace(
+        a,
+        histogram=hist,
+        extents=(wa * a.extents + wb * b.extents) / (wa + wb),
+        centroid=(wa * a.centroid + wb * b.centroid) / (wa + wb),
+        yaw=float(yaw),
+    )
+
+
+def merge(
+    a: Smc, b: Smc, support_a: int, support_b: int = 1, params: SmcParams | None = None
+) -> Smc:
+    """Merge two contingent SMCs: the support-weighted mean of their parameters (3.8).
+
+    ``b``'s goal and approach are first turned into ``a``'s symmetric equivalent
+    (:func:`align`), so that the mean is taken between like and like.
+    """
+    wa, wb = float(support_a), float(support_b)
+    pa, pb = a.perception, b.perception
+    cluster = None
+    if pa.cluster is not None and pb.cluster is not None:
+        cluster = _mean_cluster(pa.cluster, pb.cluster, wa, wb)
+    weight = None
+    if pa.weight is not None and pb.weight is not None:
+        weight = (wa * pa.weight + wb * pb.weight) / (wa + wb)
+    aa, ab = a.action, b.action
+    theta = align(aa, ab, params or SmcParams()).rotation
+    goal_b = np.r_[rotate_z(ab.goal[:3], theta), ab.goal[3] + theta]
+    symmetry = common_symmetry(aa.symmetry, ab.symmetry)
+    yaw_period = TWO_PI if symmetry >= TWO_PI - 1e-6 else math.pi
+    goal = (wa * aa.goal + wb * goal_b) / (wa + wb)
+    goal[3] = wrap_angle(
+        aa.goal[3] + wb / (wa + wb) * wrap_angle(float(goal_b[3] - aa.goal[3]), yaw_period)
+    )
+    n = min(len(aa.approach), len(ab.approach))
+    approach = (wa * aa.approach[:n] + wb * rotate_z(ab.approach[:n], theta)) / (wa + wb)
+    action = Action(
+        dmp=dmp_mod.merge([aa.dmp, ab.dmp], [wa, wb]),
+        goal_frame=aa.goal_frame,
+        goal=goal,
+        gripper_start=(wa * aa.gripper_start + wb * ab.gripper_start) / (wa + wb),
+        gripper_end=(wa * aa.gripper_end + wb * ab.gripper_end) / (wa + wb),
+        gripper_phase=(wa * aa.gripper_phase + wb * ab.gripper_phase) / (wa + wb),
+        symmetry=symmetry,
+        approach=approach.reshape(-1, 3),
+        held_symmetry=max(aa.held_symmetry, ab.held_symmetry),
+    )
+    return Smc(perception=SalientPerceptions(cluster=cluster, weight=weight), action=action)

@@ -1,0 +1,302 @@
+"""``smc record``: an operator drives the robot in a scene; everything goes into an MCAP log.
+
+The loop runs at the control rate (100 Hz of simulation time): the operator gives a POI
+command, the Cartesian controller tracks it, and the log receives the command, joint
+states, POI, scale reading and ground truth every tick and the RGB-D camera at its rate.
+The log is written as ``NAME.mcap.part`` (flushed every second) and renamed on a clean
+finish, so a crash loses at most the last second and never leaves a half-written
+``NAME.mcap``.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from smccli import __version__
+from smccli.errors import ScriptError
+from smccli.logs import LogWriter, log_summary
+from smccli.logs.writer import scene_attachments
+from smccli.outputs import check_output
+from smccli.world.scene import Scene, load_scene, nominal_layout, sample_layout
+from smccli.world.sim import Sim
+
+if TYPE_CHECKING:
+    from smccli.record.keyboard import KeyboardOperator
+    from smccli.record.operators import ScriptOperator
+
+MAX_DURATION = 600.0
+"""A recording longer than this [s of sim time] is stopped as a runaway script."""
+
+
+@dataclass(frozen=True, slots=True)
+class RecordConfig:
+    """What to record."""
+
+    scene: str
+    """Built-in scene name or path to a scene.yaml."""
+    operator: str = "script"
+    """``script`` or ``keyboard``."""
+    script: Path | None = None
+    """Teleop script for the script operator."""
+    seed: int = 0
+    """Seed of the operator's noise (and of the layout with ``randomize``)."""
+    output: Path = Path("demo.mcap")
+    """Log to write."""
+    force: bool = False
+    """Overwrite an existing log."""
+    randomize: bool = False
+    """Start from a random layout of the scene instead of the nominal one."""
+    ground_truth_rate: float = 10.0
+    """Rate of ``/sim/ground_truth`` [Hz] (evaluation only)."""
+    realtime: bool = False
+    """Pace the script operator at real time, as a person would (keyboard: always)."""
+    reproducible: bool = False
+    """Cut chunks on simulation time only, so the same script and seed give a byte-identical
+    file (sample logs); otherwise also every wall-clock second, for crash safety."""
+
+
+@dataclass(frozen=True, slots=True)
+class RecordStatus:
+    """Live status, reported every few ticks."""
+
+    t: float
+    """Simulation time [s]."""
+    messages: int
+    """Messages written so far."""
+    marks: int
+    """Saliency marks so far."""
+    t_on_disk: float = 0.0
+    """Simulation time [s] up to which the log is on disk (survives a crash)."""
+
+
+@dataclass(frozen=True, slots=True)
+class RecordSummary:
+    """What was recorded."""
+
+    path: Path
+    """The log written."""
+    duration: float
+    """Simulation time recorded [s]."""
+    wall_time: float
+    """Wall-clock time spent [s]."""
+    fragments: int
+    """Fragments marked by the operator (= marks)."""
+    topics: dict[str, tuple[int, float]]
+    """Topic -> (message count, rate [Hz])."""
+    size_bytes: int
+    """File size [bytes]."""
+    interrupted: str | None = None
+    """Why the recording stopped early (``SIGINT``, ``SIGTERM``), or None if it finished."""
+
+
+def _metadata(scene: Scene, cfg: RecordConfig, extra: dict[str, str]) -> dict[str, str]:
+    return {
+        "scene": scene.name,
+        "scene_digest": scene.digest,
+        "robot": scene.robot.name,
+        "smc_version": __version__,
+        "seed": str(cfg.seed),
+        "operator": cfg.operator,
+        "control_rate_hz": "100",
+        "state_rate_hz": "100",
+        "camera_rate_hz": f"{scene.camera.rate:g}",
+        "has_scale": "true" if scene.scale else "false",
+        **extra,
+    }
+
+
+def record(
+    cfg: RecordConfig,
+    on_status: Callable[[RecordStatus], None] | None = None,
+    on_message: Callable[[str], None] | None = None,
+) -> RecordSummary:
+    """Record one demonstration into ``cfg.output``; see the module docstring.
+
+    SIGINT or SIGTERM (when called from the main thread) end the recording cleanly: the log
+    is kept, marked ``interrupted`` in its ``smc_end`` metadata, and the summary says so.
+    Only the operator's explicit discard, or an error in a teleop script (which re-records
+    the same demonstration), removes the log; any other failure keeps what was recorded.
+    """
+    out = check_output(cfg.output, force=cfg.force)
+    scene = load_scene(cfg.scene)
+    extra: dict[str, str] = {}
+    if cfg.operator == "script":
+        from smccli.record.operators import ScriptOperator, load_script, script_layout
+
+        if cfg.script is None:
+            raise ScriptError("--operator script needs --script FILE")
+        script = load_script(cfg.script)
+        layout = script_layout(scene, script, _rng(cfg.seed) if cfg.randomize else None)
+        sim = Sim(scene, layout)
+        operator: ScriptOperator | KeyboardOperator = ScriptOperator(script, sim, seed=cfg.seed)
+        extra["script"] = Path(cfg.script).name
+    elif cfg.operator == "keyboard":
+        from smccli.record.keyboard import KeyboardOperator
+
+        first = scene.variants[0][0] if scene.variants else None
+        layout = (
+            sample_layout(scene, _rng(cfg.seed)) if cfg.randomize else nominal_layout(scene, first)
+        )
+        sim = Sim(scene, layout)
+        operator = KeyboardOperator(sim, on_ready=on_message)
+    else:
+        raise ScriptError(f"unknown operator {cfg.operator!r} (valid: script, keyboard)")
+    wall0 = time.perf_counter()
+    marks = 0
+    try:
+        writer = LogWriter(
+            out,
+            metadata=_metadata(scene, cfg, extra),
+            attachments=scene_attachments(scene),
+            force=cfg.force,
+            wall_clock_flush=not cfg.reproducible,
+        )
+        try:
+            with _stop_requests() as stop:
+                marks = _session(writer, sim, operator, cfg, stop, on_status)
+        except ScriptError:
+            writer.abort()  # the script's fault (or the operator's discard): re-record it
+            raise
+        except BaseException as exc:
+            writer.close(interrupted=f"error: {exc.__class__.__name__}")
+            raise
+        interrupted = stop[0] if stop else None
+        writer.close(interrupted=interrupted)
+    finally:
+        # The sensor renderer's GL context first, then the viewer: the viewer's thread
+        # tears GLFW down, and a context freed after that crashes the process.
+        sim.close()
+        if hasattr(operator, "close"):
+            operator.close()
+    summary = log_summary(out)
+    return RecordSummary(
+        path=out,
+        duration=sim.t,
+        wall_time=time.perf_counter() - wall0,
+        fragments=marks,
+        topics={k: (int(v["count"]), float(v["rate_hz"])) for k, v in summary["topics"].items()},
+        size_bytes=out.stat().st_size,
+        interrupted=interrupted,
+    )
+
+
+def _session(
+    writer: LogWriter,
+    sim: Sim,
+    operator: ScriptOperator | KeyboardOperator,
+    cfg: RecordConfig,
+    stop: list[str],
+    on_status: Callable[[RecordStatus], None] | None,
+) -> int:
+    """The recording loop, until the operator is done or ``stop`` holds a signal's name.
+
+    Returns the number of saliency marks written.
+    """
+    marks = 0
+    cam_period = 1.0 / sim.scene.camera.rate
+    gt_period = 1.0 / cfg.ground_truth_rate
+    next_cam = next_gt = 0.0
+    tick = 0
+    _log_state(writer, sim)
+    frame = sim.render_camera()
+    _log_cloud(writer, sim, frame)  # what the robot saw as the demonstration began
+    t_wall0 = time.perf_counter()
+    while not stop:
+        t = sim.t
+        if cfg.realtime and cfg.operator == "script":
+            ahead = t - (time.perf_counter() - t_wall0)
+            if ahead > 0:
+                time.sleep(ahead)
+        if t >= next_cam - 1e-9:
+            frame = sim.render_camera() if t > 0 else frame
+            writer.write_camera(frame)
+            next_cam += cam_period
+        if t >= next_gt - 1e-9:
+            writer.write_ground_truth(t, sim.ground_truth())
+            next_gt += gt_period
+        step = operator.tick()
+        for mark in step.marks:
+            writer.write_saliency(mark)
+            marks += 1
+        if step.marks:  # the scene at each salient moment, for inspection
+            _log_cloud(writer, sim, frame)
+        if step.done:
+            break
+        writer.write_command(step.command)
+        sim.step(step.command)
+        _log_state(writer, sim)
+        tick += 1
+        if on_status and tick % 10 == 0:
+            on_status(
+                RecordStatus(
+                    t=sim.t,
+                    messages=sum(writer.counts.values()),
+                    marks=marks,
+                    t_on_disk=writer.t_on_disk,
+                )
+            )
+        if sim.t > MAX_DURATION:
+            if cfg.operator == "script":  # a runaway script: fix it and record again
+                raise ScriptError(
+                    f"{cfg.script}: recording passed {MAX_DURATION:.0f} s of simulation "
+                    "time; stopped"
+                )
+            stop.append(f"time limit {MAX_DURATION:.0f} s")  # a person's work: keep it
+            break
+    if getattr(operator, "discarded", False):
+        raise ScriptError("recording discarded by the operator; nothing written")
+    return marks
+
+
+@contextmanager
+def _stop_requests() -> Iterator[list[str]]:
+    """SIGINT and SIGTERM append their name to the yielded list instead of raising.
+
+    The loop checks the list once per tick, so a signal never lands in the middle of a
+    write and the log can be closed cleanly. Outside the main thread (where Python cannot
+    install handlers) the list stays empty and signals behave as usual.
+    """
+    stop: list[str] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield stop
+        return
+
+    def handler(signum: int, _frame: object) -> None:
+        stop.append(signal.Signals(signum).name)
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield stop
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+def _log_state(writer: LogWriter, sim: Sim) -> None:
+    t = sim.t
+    writer.write_joint_state(sim.joint_state())
+    writer.write_poi(t, sim.poi())
+    w = sim.weight()
+    if w is not None:
+        writer.write_weight(t, w)
+
+
+def _log_cloud(writer: LogWriter, sim: Sim, frame) -> None:
+    """World-frame point cloud of the workspace (robot removed) on ``/perception/points``."""
+    from smccli.perception import PerceptionParams, cloud_from_frame
+
+    points, colors = cloud_from_frame(frame, sim.robot_geometry(), PerceptionParams())
+    writer.write_point_cloud(sim.t, points[::2].astype("float32"), colors[::2])
+
+
+def _rng(seed: int):
+    import numpy as np
+
+    return np.random.default_rng(seed)

@@ -1,0 +1,236 @@
+"""Cartesian controller: a POI target ``[x, y, z, yaw]`` (gripper pointing down) to joint targets.
+
+Damped least squares on ``mj_jacSite`` (position and orientation), with a nullspace pull
+towards a comfortable posture:
+
+    dq = Jᵀ (J Jᵀ + λ² I)⁻¹ e  +  (I − J⁺ J) k (q_home − q)
+
+where ``e`` stacks the position error [m] and the orientation error (axis-angle, world
+frame) [rad]. The controller solves on its own ``MjData`` (kinematics only) from the last
+joint target, so the position servos receive a consistent, smooth target and the robot's
+dynamics (sag, contacts) never feed back into the IK. The same controller serves teleop
+and replay.
+"""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+
+from smccli.errors import SceneError
+from smccli.world.robot import Robot
+
+# Flip so that the POI z axis points down; the yaw then rotates about world z.
+_DOWN = np.diag([1.0, -1.0, -1.0])
+
+
+def target_rotation(yaw: float) -> np.ndarray:
+    """POI orientation for a gripper pointing down at ``yaw`` [rad], shape (3, 3)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ _DOWN
+
+
+def wrap(angle: float) -> float:
+    """Angle wrapped to (−π, π] [rad]."""
+    return math.pi - (math.pi - angle) % (2 * math.pi)
+
+
+def rotation_error(R_target: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Axis-angle vector of ``R_target Rᵀ`` (world frame), shape (3,) [rad]."""
+    quat = np.empty(4)
+    mujoco.mju_mat2Quat(quat, (R_target @ R.T).ravel())
+    err = np.empty(3)
+    mujoco.mju_quat2Vel(err, quat, 1.0)
+    return err
+
+
+def poi_pose(data: mujoco.MjData, site_id: int) -> np.ndarray:
+    """POI ``[x, y, z, yaw]`` from a site's pose; yaw is that of the site's x axis."""
+    R = data.site_xmat[site_id].reshape(3, 3)
+    return np.array([*data.site_xpos[site_id], math.atan2(R[1, 0], R[0, 0])])
+
+
+class CartesianController:
+    """Turns POI targets into arm joint targets, one control tick at a time.
+
+    Built from a :class:`~smccli.world.robot.Robot`: its arm joints (base to flange), POI
+    site and home posture (the nullspace pulls towards it). The yaw heuristics assume what
+    the robot file promises: the first joint turns about the vertical and the last rolls
+    the gripper when it points down.
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        robot: Robot,
+        *,
+        damping: float = 0.03,
+        nullspace_gain: float = 0.2,
+        max_joint_speed: float = 2.5,
+        control_period: float = 0.01,
+        iterations: int = 3,
+    ) -> None:
+        self.model = model
+        self.data = mujoco.MjData(model)  # scratch: kinematics for the IK only
+        self.site_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, robot.poi)
+        if self.site_id < 0:
+            raise SceneError(f"robot {robot.name}: model has no POI site {robot.poi!r}")
+        jids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in robot.arm_joints]
+        if min(jids) < 0:
+            raise SceneError(
+                f"robot {robot.name}: model lacks the arm joints {', '.join(robot.arm_joints)}"
+            )
+        self.home = robot.home_array()
+        """Home posture, shape (n,) [rad]."""
+        self.qadr = np.array([model.jnt_qposadr[j] for j in jids])
+        self.dofadr = np.array([model.jnt_dofadr[j] for j in jids])
+        self.lo = model.jnt_range[jids, 0].copy()
+        self.hi = model.jnt_range[jids, 1].copy()
+        self.damping = damping
+        self.nullspace_gain = nullspace_gain
+        self.max_step = max_joint_speed * control_period
+        self.iterations = iterations
+        self.q = self.home.copy()
+        """Current joint target, shape (n,) [rad]."""
+        # Pointing down in the home posture's shape, POI yaw = q_first - q_last + offset;
+        # the offset is the robot's (0 for the arm, pi/4 for the Panda's hand), read at home.
+        self._yaw_offset = wrap(self.forward(self.home)[3] - (self.home[0] - self.home[-1]))
+        self._q_last_goal: float | None = None
+        self._jacp = np.zeros((3, model.nv))
+        self._jacr = np.zeros((3, model.nv))
+
+    def reset(self, q: np.ndarray) -> None:
+        """Restart from joint positions ``q``, shape (n,) [rad]."""
+        self.q = np.clip(np.asarray(q, dtype=float), self.lo, self.hi)
+
+    def forward(self, q: np.ndarray) -> np.ndarray:
+        """POI ``[x, y, z, yaw]`` at joint positions ``q`` (forward kinematics)."""
+        self._set(q)
+        return poi_pose(self.data, self.site_id)
+
+    def _set(self, q: np.ndarray) -> None:
+        self.data.qpos[self.qadr] = q
+        mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_comPos(self.model, self.data)
+
+    def error(self, q: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """Task error at ``q``: position [m] and orientation [rad], shape (6,)."""
+        self._set(q)
+        pos = self.data.site_xpos[self.site_id]
+        R = self.data.site_xmat[self.site_id].reshape(3, 3)
+        return np.concatenate([target[:3] - pos, rotation_error(target_rotation(target[3]), R)])
+
+    def ik_step(self, q: np.ndarray, target: np.ndarray, max_step: float | None) -> np.ndarray:
+        """One damped-least-squares step from ``q`` towards ``target``; returns the new q."""
+        e = self.error(q, target)
+        mujoco.mj_jacSite(self.model, self.data, self._jacp, self._jacr, self.site_id)
+        J = np.vstack([self._jacp[:, self.dofadr], self._jacr[:, self.dofadr]])
+        # A joint at a limit that the step pushes further would have its share clipped away
+        # and the error would stay (the Panda's wrist roll, 5.8 rad of travel, stalled 0.4
+        # rad short): lock it for this step so the other joints take the error up.
+        free = np.ones(len(q), dtype=bool)
+        for _ in range(3):
+            dq = self._step(J * free, e, q, target) * free
+            pushed = ((q <= self.lo + 1e-9) & (dq < 0)) | ((q >= self.hi - 1e-9) & (dq > 0))
+            if not (pushed & free).any():
+                break
+            free &= ~pushed
+        if max_step is not None:
+            biggest = np.max(np.abs(dq))
+            if biggest > max_step:
+                dq *= max_step / biggest
+        return np.clip(q + dq, self.lo, self.hi)
+
+    def _step(self, J: np.ndarray, e: np.ndarray, q: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """Damped least squares on ``J`` plus the posture pull in its nullspace."""
+        JJt = J @ J.T + self.damping**2 * np.eye(6)
+        dq = J.T @ np.linalg.solve(JJt, e)
+        # Nullspace: keep the elbow and the redundant rolls near the home posture.
+        # Exact projector (not the damped one), so the posture pull leaves no task error.
+        N = np.eye(len(q)) - np.linalg.pinv(J, rcond=1e-4) @ J
+        posture = self.home - q
+        # The base yaw's comfortable value points the arm at the target, the last joint's
+        # is the branch :meth:`yaw_subgoal` chose for the target's yaw.
+        posture[0] = wrap(math.atan2(target[1], target[0]) - q[0])
+        if self._q_last_goal is not None:
+            posture[-1] = self._q_last_goal - q[-1]
+        return dq + N @ (self.nullspace_gain * posture)
+
+    def yaw_subgoal(self, q: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """``target`` with its yaw replaced by a waypoint at most 0.5 rad from the current yaw.
+
+        The orientation error alone always turns the short way, which can drive the wrist
+        roll into its limit. Pointing down in the home posture's shape, yaw = q_first −
+        q_last + offset (the first joint turns the yaw with it, the last one against it);
+        with q_first settling at the target's bearing, pick the q_last branch inside the
+        limits closest to the current q_last and turn the way that leads there. That
+        branch is also where the posture pull takes q_last (:meth:`_step`), so the
+        redundant joints do not wind up to trade the last joint's travel for theirs.
+        """
+        self._set(q)
+        R = self.data.site_xmat[self.site_id].reshape(3, 3)
+        yaw = math.atan2(R[1, 0], R[0, 0])
+        d = wrap(target[3] - yaw)
+        q1 = math.atan2(target[1], target[0])
+        base = wrap(q1 + self._yaw_offset - target[3])
+        branches = [base + k * 2 * math.pi for k in (-1, 0, 1)]
+        inside = [b for b in branches if self.lo[-1] + 0.05 < b < self.hi[-1] - 0.05]
+        q_last = min(inside or branches, key=lambda b: abs(b - q[-1]))
+        self._q_last_goal = float(np.clip(q_last, self.lo[-1], self.hi[-1]))
+        planned = (q1 - q_last) - (q[0] - q[-1])  # unwrapped yaw change on that branch
+        d += 2 * math.pi * round((planned - d) / (2 * math.pi))
+        sub = np.array(target, dtype=float)
+        sub[3] = yaw + float(np.clip(d, -0.5, 0.5))
+        return sub
+
+    def update(self, target: np.ndarray) -> np.ndarray:
+        """Joint targets for this control tick, shape (n,) [rad]; joint speed is capped."""
+        target = np.asarray(target, dtype=float)
+        q = self.q
+        budget = self.max_step
+        for _ in range(self.iterations):
+            q_new = self.ik_step(q, self.yaw_subgoal(q, target), budget)
+            budget -= float(np.max(np.abs(q_new - q)))
+            q = q_new
+            if budget <= 1e-9:
+                break
+        self.q = q
+        return q
+
+    def solve(
+        self,
+        target: np.ndarray,
+        q0: np.ndarray | None = None,
+        *,
+        max_iterations: int = 300,
+        tol_pos: float = 1e-3,
+        tol_rot: float = math.radians(0.5),
+    ) -> tuple[np.ndarray, bool]:
+        """Full IK from ``q0`` (default home): joint positions and whether they converged."""
+        target = np.asarray(target, dtype=float)
+        q = self.home.copy() if q0 is None else np.asarray(q0, dtype=float).copy()
+        # Start the base yaw pointing at the target: avoids the DLS wandering at the start.
+        q[0] = np.clip(math.atan2(target[1], target[0]), self.lo[0], self.hi[0])
+        for _ in range(max_iterations):
+            e = self.error(q, target)
+            if np.linalg.norm(e[:3]) < tol_pos and np.linalg.norm(e[3:]) < tol_rot:
+                return q, True
+            q = self.ik_step(q, self.yaw_subgoal(q, target), 0.2)
+        e = self.error(q, target)
+        return q, bool(np.linalg.norm(e[:3]) < tol_pos and np.linalg.norm(e[3:]) < tol_rot)
+
+
+def reachable(
+    model: mujoco.MjModel, robot: Robot, target: np.ndarray, *, min_z: float = 0.01
+) -> bool:
+    """Whether the POI can reach ``target`` [x, y, z, yaw] pointing down (IK converges).
+
+    ``min_z`` [m]: lowest POI height above the table accepted (keeps the fingertips out).
+    """
+    target = np.asarray(target, dtype=float)
+    if target.shape != (4,) or not np.all(np.isfinite(target)) or target[2] < min_z:
+        return False
+    _, ok = CartesianController(model, robot).solve(target)
+    return ok

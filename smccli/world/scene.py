@@ -1,0 +1,672 @@
+"""Scenes: an MJCF model (table, camera) plus a scene file (YAML) naming the robot and the objects.
+
+The robot's MJCF (:mod:`smccli.world.robot`) is included beside the scene's, its root at the
+world origin; the objects are built from the scene file with ``mujoco.MjSpec`` so their look,
+mass and pose have one source of truth. A :class:`Scene` carries the flattened,
+self-contained MJCF text of the whole model and the robot file's text, so a log can embed
+them and :func:`load_scene_from_text` can rebuild the scene without the original files.
+
+World frame: origin at the robot's base on the table top (z = 0), x away from the robot, z up.
+An object's pose is that of its bounding-box centre: ``(x, y, z, yaw)`` [m, m, m, rad].
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from xml.sax.saxutils import quoteattr
+
+import mujoco
+import numpy as np
+
+from smccli.errors import LogError, SceneError
+from smccli.schemas import KeyPath, check_yaml, parse_yaml, validate_yaml
+from smccli.world.robot import (
+    DEFAULT_ROBOT,
+    ROBOTS_DIR,
+    Robot,
+    check_robot,
+    kinematics_digest,
+    load_robot,
+    resolve_robot_path,
+    robot_from_text,
+)
+
+SCENES_DIR = Path(__file__).parent / "scenes"
+SHAPES = ("box", "cylinder", "pyramid", "open_box", "scale", "mug")
+RELATIONS = ("on_top_of", "inside")
+PYRAMID_STEPS = 3
+"""A pyramid is approximated by this many stacked boxes (no meshes offline)."""
+
+Layout = dict[str, tuple[float, float, float, float]]
+"""Object name -> pose ``(x, y, z, yaw)`` [m, m, m, rad] of its bounding-box centre."""
+
+
+@dataclass(frozen=True, slots=True)
+class ObjectSpec:
+    """One object of a scene, as the scene file describes it."""
+
+    name: str
+    """Body name in the model."""
+    shape: str
+    """One of :data:`SHAPES`."""
+    size: tuple[float, float, float]
+    """Full extents of the bounding box along x, y, z [m] (cylinder: x = y = diameter; mug:
+    x = body diameter + handle reach, y = body diameter)."""
+    rgba: tuple[float, float, float, float]
+    """Colour, each in [0, 1]."""
+    mass: float
+    """Mass [kg] (for ``scale``: of the platform)."""
+    pose: tuple[float, float, float, float]
+    """Nominal pose ``(x, y, z, yaw)`` of the bounding-box centre [m, m, m, rad]."""
+    range_x: tuple[float, float]
+    """Randomisation range of x [m]; equal bounds mean fixed."""
+    range_y: tuple[float, float]
+    """Randomisation range of y [m]."""
+    range_yaw: tuple[float, float]
+    """Randomisation range of yaw [rad]."""
+    fixed: bool = False
+    """Welded to the world (no free joint): scales, and anything the user wants static."""
+    wall: float = 0.01
+    """Wall and floor thickness of an ``open_box`` [m]."""
+
+    @property
+    def footprint_radius(self) -> float:
+        """Radius of the circle circumscribing the object's footprint [m]."""
+        return 0.5 * math.hypot(self.size[0], self.size[1])
+
+
+@dataclass(frozen=True, slots=True)
+class Condition:
+    """``object`` rests ``relation`` (on top of / inside) ``target``."""
+
+    object: str
+    """Name of the object that was moved."""
+    relation: str
+    """One of :data:`RELATIONS`."""
+    target: str
+    """Name of the object it must rest on or in."""
+
+
+@dataclass(frozen=True, slots=True)
+class SuccessCriterion:
+    """A task's success: any ``any_of`` condition holds and no ``none_of`` condition holds."""
+
+    task: str
+    """Task name, e.g. ``cube_on_green``."""
+    any_of: tuple[Condition, ...]
+    """At least one of these must hold."""
+    none_of: tuple[Condition, ...] = ()
+    """None of these may hold (e.g. the heavy object in the light bin)."""
+
+
+@dataclass(frozen=True, slots=True)
+class CameraSpec:
+    """The RGB-D sensor camera."""
+
+    name: str
+    """MJCF camera name."""
+    width: int
+    """Image width [px]."""
+    height: int
+    """Image height [px]."""
+    rate: float
+    """Frame rate [Hz]."""
+
+
+@dataclass(frozen=True, slots=True)
+class Scene:
+    """A built-in or user scene: model text, scene file text and what they declare."""
+
+    name: str
+    """Scene name (``pick_place``, …)."""
+    yaml_path: Path | None
+    """The scene file, or None when rebuilt from text (a log)."""
+    yaml_text: str
+    """The scene file's text, verbatim."""
+    mjcf: str
+    """Flattened self-contained MJCF of the whole model, objects included."""
+    digest: str
+    """``sha256:<hex>`` of the scene file text and the MJCF text."""
+    objects: tuple[ObjectSpec, ...]
+    """The objects, in scene-file order."""
+    camera: CameraSpec
+    """The sensor camera."""
+    scale: str | None
+    """Name of the scale object (its force sensor is ``<name>_force``), or None."""
+    robot: Robot
+    """The robot the scene holds."""
+    success: tuple[SuccessCriterion, ...]
+    """One criterion per task."""
+    description: str = ""
+    """One line for ``smc scenes``."""
+    variants: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    """Named subsets of the optional objects, ``(name, object names)``. A layout holds the
+    objects of one variant plus every object no variant names (tables, bins, scales);
+    the others are parked out of sight. Empty: every object is always present."""
+
+    def variant_objects(self, variant: str | None) -> tuple[str, ...]:
+        """Objects present in ``variant`` (all objects when None or without variants)."""
+        if variant is None or not self.variants:
+            return tuple(o.name for o in self.objects)
+        table = dict(self.variants)
+        if variant not in table:
+            raise SceneError(
+                f"scene {self.name}: no variant {variant!r} (variants: {', '.join(table)})"
+            )
+        optional = {n for _, names in self.variants for n in names}
+        return tuple(
+            o.name for o in self.objects if o.name not in optional or o.name in table[variant]
+        )
+
+    @property
+    def poi(self) -> str:
+        """Name of the POI site (the end-effector)."""
+        return self.robot.poi
+
+    def object(self, name: str) -> ObjectSpec:
+        """The object called ``name``; SceneError listing the valid names otherwise."""
+        for obj in self.objects:
+            if obj.name == name:
+                return obj
+        valid = ", ".join(o.name for o in self.objects)
+        raise SceneError(f"scene {self.name}: no object {name!r} (objects: {valid})")
+
+    def model(self) -> mujoco.MjModel:
+        """Compile the MJCF into a fresh model."""
+        try:
+            return mujoco.MjModel.from_xml_string(self.mjcf)
+        except ValueError as exc:
+            raise SceneError(f"scene {self.name}: MJCF does not compile: {exc}") from exc
+
+
+def builtin_names() -> list[str]:
+    """Names of the built-in scenes."""
+    return sorted(p.parent.name for p in SCENES_DIR.glob("*/scene.yaml"))
+
+
+def list_scenes() -> list[Scene]:
+    """All built-in scenes."""
+    return [load_scene(n) for n in builtin_names()]
+
+
+def load_scene(name_or_path: str | Path) -> Scene:
+    """A built-in scene by name, or a user scene by the path of its ``scene.yaml``."""
+    text = str(name_or_path)
+    if text in builtin_names():
+        path = SCENES_DIR / text / "scene.yaml"
+    else:
+        path = Path(name_or_path)
+        if not path.is_file():
+            raise SceneError(
+                f"{text}: no such scene (built-in scenes: {', '.join(builtin_names())}; "
+                "or give the path of a scene.yaml)"
+            )
+    yaml_text = path.read_text()
+    raw = _parse_yaml(yaml_text, str(path))
+    mjcf_file = path.parent / str(raw.get("mjcf", "scene.xml"))
+    if not mjcf_file.is_file():
+        raise SceneError(f"{path}: MJCF file {mjcf_file} not found")
+    ref = raw.get("robot", DEFAULT_ROBOT)
+    try:
+        if isinstance(ref, str):
+            try:
+                robot_file = resolve_robot_path(ref, relative_to=path.parent)
+            except SceneError as exc:
+                raise SceneError(f"{_at(yaml_text, str(path), ('robot',))}: {exc}") from None
+            robot = load_robot(robot_file)
+            # The robot first: its <option> and <compiler> apply, the scene's may refine them.
+            spec = mujoco.MjSpec.from_string(
+                f"<mujoco model={quoteattr(str(raw['name']))}>"
+                f"<include file={quoteattr(str(robot.mjcf_path))}/>"
+                f"<include file={quoteattr(str(mjcf_file.resolve()))}/></mujoco>"
+            )
+        else:  # a scene file from before robot files: its MJCF includes the built-in arm
+            robot = load_robot(DEFAULT_ROBOT)
+            spec = mujoco.MjSpec.from_file(str(mjcf_file))
+    except ValueError as exc:
+        raise SceneError(f"{mjcf_file}: invalid MJCF: {' '.join(str(exc).split())}") from exc
+    scene = _build(raw, yaml_text, spec, str(path), robot)
+    return _replace_path(scene, path)
+
+
+def load_scene_from_text(
+    yaml_text: str, mjcf_text: str, robot_yaml: str | None = None, *, log: str | None = None
+) -> Scene:
+    """Rebuild a scene from the texts a log embeds (``Scene.yaml_text``, ``Scene.mjcf``,
+    ``Robot.yaml_text``). A log from before robot files has no robot file: its scene holds
+    the built-in robot its scene file names (the arm).
+
+    ``log``: the log file the texts were attached to; errors are then LogError naming it
+    and the attachment (``demo.mcap: attachment scene.yaml: ...``), else SceneError.
+    """
+    at_yaml = f"{log}: attachment scene.yaml" if log else "<embedded scene.yaml>"
+    at_xml = f"{log}: attachment scene.xml" if log else "<embedded MJCF>"
+    at_robot = f"{log}: attachment robot.yaml" if log else "<embedded robot.yaml>"
+    try:
+        raw = _parse_yaml(yaml_text, at_yaml)
+        try:
+            model = mujoco.MjModel.from_xml_string(mjcf_text)
+        except ValueError as exc:
+            raise SceneError(
+                f"{at_xml}: MuJoCo rejects the MJCF ({' '.join(str(exc).split())})"
+            ) from exc
+        if robot_yaml is None:
+            ref = raw.get("robot", DEFAULT_ROBOT)
+            name = ref if isinstance(ref, str) else DEFAULT_ROBOT
+            if not (ROBOTS_DIR / name / "robot.yaml").is_file():
+                raise SceneError(f"{at_robot} missing (the scene names robot {name!r})")
+            robot_yaml = (ROBOTS_DIR / name / "robot.yaml").read_text()
+        robot, doc = robot_from_text(robot_yaml, at_robot)
+        check_robot(robot, model, doc, "attachment scene.xml", SceneError)
+        return _scene(raw, yaml_text, mjcf_text, at_yaml, robot, model)
+    except SceneError as exc:
+        if log is None:
+            raise
+        raise LogError(str(exc)) from exc
+
+
+def scene_of_log(attachments: Mapping[str, bytes], log: str | Path) -> Scene:
+    """The scene a log's attachments hold (``scene.yaml``, ``scene.xml``, ``robot.yaml``);
+    LogError naming the log and the attachment when one is missing or wrong."""
+    texts: dict[str, str | None] = {}
+    what = {"scene.xml": "the scene's MJCF", "scene.yaml": "the scene file"}
+    for name in ("scene.xml", "scene.yaml", "robot.yaml"):
+        data = attachments.get(name)
+        if data is None:
+            if name in what:  # robot.yaml: older logs have none, their robot is the arm
+                raise LogError(f"{log}: attachment {name} missing ({what[name]})")
+            texts[name] = None
+            continue
+        try:
+            texts[name] = data.decode() if isinstance(data, bytes) else str(data)
+        except UnicodeDecodeError as exc:
+            raise LogError(f"{log}: attachment {name}: not UTF-8 text ({exc})") from None
+    return load_scene_from_text(
+        texts["scene.yaml"] or "",
+        texts["scene.xml"] or "",
+        texts["robot.yaml"],
+        log=str(log),
+    )
+
+
+def robot_identity(scene: Scene, model: mujoco.MjModel | None = None) -> dict[str, str]:
+    """What a tree records of the robot it was taught on: name and kinematics digest."""
+    model = model or scene.model()
+    return {"name": scene.robot.name, "kinematics": kinematics_digest(scene.robot, model)}
+
+
+def sensor_identity(scene: Scene, model: mujoco.MjModel | None = None) -> dict[str, Any]:
+    """What a tree records of the sensors it perceives through: the camera's resolution and
+    vertical field of view [deg], and whether the scene has a scale."""
+    model = model or scene.model()
+    cam = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, scene.camera.name)
+    return {
+        "camera": {
+            "width": scene.camera.width,
+            "height": scene.camera.height,
+            "fovy": round(float(model.cam_fovy[cam]), 6),
+        },
+        "scale": scene.scale is not None,
+    }
+
+
+def nominal_layout(scene: Scene, variant: str | None = None) -> Layout:
+    """The objects of ``variant`` (default: all) at their nominal poses."""
+    present = scene.variant_objects(variant)
+    return {o.name: tuple(o.pose) for o in scene.objects if o.name in present}  # type: ignore[misc]
+
+
+def sample_layout(
+    scene: Scene, rng: np.random.Generator, *, variant: str | None = None, max_tries: int = 1000
+) -> Layout:
+    """Draw each object's x, y, yaw uniformly from its ranges; redraw while footprints overlap.
+
+    A scene with variants draws one uniformly unless ``variant`` is given. Footprints are
+    the circles circumscribing the objects (conservative), with 1 cm between.
+    """
+    gap = 0.01
+    if variant is None and scene.variants:
+        names = [v for v, _ in scene.variants]
+        variant = names[int(rng.integers(len(names)))]
+    present = scene.variant_objects(variant)
+    for _ in range(max_tries):
+        layout: Layout = {}
+        for o in scene.objects:
+            if o.name not in present:
+                continue
+            x = float(rng.uniform(*o.range_x)) if o.range_x[0] < o.range_x[1] else o.range_x[0]
+            y = float(rng.uniform(*o.range_y)) if o.range_y[0] < o.range_y[1] else o.range_y[0]
+            lo, hi = o.range_yaw
+            yaw = float(rng.uniform(lo, hi)) if lo < hi else lo
+            layout[o.name] = (x, y, o.pose[2], yaw)
+        if not _overlaps(scene, layout, gap):
+            return layout
+    raise SceneError(
+        f"scene {scene.name}: no overlap-free layout in {max_tries} draws (ranges too tight)"
+    )
+
+
+def load_layout_file(path: str | Path, scene: Scene) -> Layout:
+    """A layout of the user's (``smc replay --layout``): YAML or JSON, checked against
+    ``schemas/layout.schema.json``, mapping object -> ``[x, y, z, yaw]`` [m, m, m, rad] or
+    ``[x, y, yaw]`` (z: the object's nominal height). Objects left out are absent."""
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"{p}: cannot read layout: {exc}") from exc
+    doc = parse_yaml(text, str(p), SceneError)
+    check_yaml(doc, "layout", SceneError)
+    names = [o.name for o in scene.objects]
+    layout: Layout = {}
+    for name, values in doc.data.items():
+        if name not in names:
+            raise SceneError(
+                f"{p}: {doc.where((name,), of_key=True)}: no object {name!r} in scene "
+                f"{scene.name} (objects: {', '.join(names)})"
+            )
+        pose = _vec(values)
+        if len(pose) == 3:  # [x, y, yaw]: z from the scene file
+            pose = (pose[0], pose[1], scene.object(name).pose[2], pose[2])
+        x, y, z, yaw = pose
+        layout[name] = (x, y, z, yaw)
+    return layout
+
+
+def _overlaps(scene: Scene, layout: Layout, gap: float) -> bool:
+    objs = [o for o in scene.objects if o.name in layout]
+    for i, a in enumerate(objs):
+        for b in objs[i + 1 :]:
+            pa, pb = layout[a.name], layout[b.name]
+            if math.hypot(pa[0] - pb[0], pa[1] - pb[1]) < (
+                a.footprint_radius + b.footprint_radius + gap
+            ):
+                return True
+    return False
+
+
+# --- scene file parsing ---------------------------------------------------------------
+
+
+def _parse_yaml(text: str, where: str) -> dict[str, Any]:
+    """The scene file's data, checked against ``schemas/scene.schema.json``."""
+    raw: dict[str, Any] = validate_yaml(text, "scene", where, SceneError)
+    return raw
+
+
+def _at(yaml_text: str, where: str, path: KeyPath) -> str:
+    """``<file>: <key path> (line n)`` for a problem the schema cannot see."""
+    # Parsed again only when there is a problem to report.
+    return f"{where}: {parse_yaml(yaml_text, where, SceneError).where(path)}"
+
+
+def _vec(values: Any) -> tuple[float, ...]:
+    return tuple(float(v) for v in values)
+
+
+def _parse(
+    raw: Mapping[str, Any], where: str, yaml_text: str
+) -> tuple[tuple[ObjectSpec, ...], CameraSpec, str | None, tuple[SuccessCriterion, ...]]:
+    """The objects, camera, scale and success criteria of a schema-valid scene file;
+    SceneError for what the schema cannot check (names that must exist, ordered ranges)."""
+    objects: list[ObjectSpec] = []
+    for i, o in enumerate(raw["objects"]):
+        name, shape = str(o["name"]), str(o["shape"])
+        if name in (ob.name for ob in objects):
+            raise SceneError(
+                f"{_at(yaml_text, where, ('objects', i, 'name'))}: duplicate object name {name!r}"
+            )
+        x, y, z, yaw = _vec(o["pose"])
+        rng = o.get("range") or {}
+        ranges = {}
+        for axis, nominal in (("x", x), ("y", y), ("yaw", yaw)):
+            lo, hi = _vec(rng.get(axis, (nominal, nominal)))
+            if lo > hi:
+                raise SceneError(
+                    f"{_at(yaml_text, where, ('objects', i, 'range', axis))}: "
+                    f"expected [low, high], found low {lo:g} above high {hi:g}"
+                )
+            ranges[axis] = (lo, hi)
+        sx, sy, sz = _vec(o["size"])
+        if shape == "mug" and sx <= sy:
+            raise SceneError(
+                f"{_at(yaml_text, where, ('objects', i, 'size'))}: a mug's size x (body diameter "
+                f"+ handle reach) must exceed its size y (body diameter), found x {sx:g} <= "
+                f"y {sy:g}"
+            )
+        r, g, b, a = _vec(o.get("rgba", (0.5, 0.5, 0.5, 1.0)))
+        objects.append(
+            ObjectSpec(
+                name=name,
+                shape=shape,
+                size=(sx, sy, sz),
+                rgba=(r, g, b, a),
+                mass=float(o.get("mass", 0.1)),
+                pose=(x, y, z, yaw),
+                range_x=ranges["x"],
+                range_y=ranges["y"],
+                range_yaw=ranges["yaw"],
+                fixed=bool(o.get("fixed", shape == "scale")),
+                wall=float(o.get("wall", 0.01)),
+            )
+        )
+    names = [o.name for o in objects]
+    sensors = raw.get("sensors") or {}
+    cam = sensors.get("camera") or {}
+    camera = CameraSpec(
+        name=str(cam.get("name", "sensor_camera")),
+        width=int(cam.get("width", 320)),
+        height=int(cam.get("height", 240)),
+        rate=float(cam.get("rate", 10.0)),
+    )
+    scale = sensors.get("scale")
+    if scale is not None:
+        scales = [o.name for o in objects if o.shape == "scale"]
+        if scale not in scales:
+            raise SceneError(
+                f"{_at(yaml_text, where, ('sensors', 'scale'))}: no object {scale!r} of shape "
+                f"scale (scales: {', '.join(scales) or 'none'})"
+            )
+    success = []
+    for task, crit in (raw.get("success") or {}).items():
+        conds: dict[str, tuple[Condition, ...]] = {}
+        for key in ("any_of", "none_of"):
+            items = []
+            for j, c in enumerate(crit.get(key) or ()):
+                for role in ("object", "target"):
+                    if c[role] not in names:
+                        raise SceneError(
+                            f"{_at(yaml_text, where, ('success', task, key, j, role))}: "
+                            f"no object {c[role]!r} (objects: {', '.join(names)})"
+                        )
+                items.append(Condition(str(c["object"]), str(c["relation"]), str(c["target"])))
+            conds[key] = tuple(items)
+        success.append(SuccessCriterion(str(task), conds["any_of"], conds["none_of"]))
+    return tuple(objects), camera, scale, tuple(success)
+
+
+def _variants(
+    raw: Mapping[str, Any], objects: tuple[ObjectSpec, ...], where: str, yaml_text: str
+) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    names = [o.name for o in objects]
+    out = []
+    for variant, members in (raw.get("variants") or {}).items():
+        for j, n in enumerate(members):
+            if n not in names:
+                raise SceneError(
+                    f"{_at(yaml_text, where, ('variants', variant, j))}: "
+                    f"no object {n!r} (objects: {', '.join(names)})"
+                )
+        out.append((str(variant), tuple(str(n) for n in members)))
+    return tuple(out)
+
+
+def _build(
+    raw: Mapping[str, Any], yaml_text: str, spec: mujoco.MjSpec, where: str, robot: Robot
+) -> Scene:
+    objects, camera, scale, success = _parse(raw, where, yaml_text)
+    for obj in objects:
+        _add_object(spec, obj)
+    try:
+        spec.compile()
+    except ValueError as exc:
+        raise SceneError(f"{where}: model does not compile: {exc}") from exc
+    mjcf = spec.to_xml()
+    model = mujoco.MjModel.from_xml_string(mjcf)
+    return _scene(raw, yaml_text, mjcf, where, robot, model)
+
+
+def _scene(
+    raw: Mapping[str, Any],
+    yaml_text: str,
+    mjcf: str,
+    where: str,
+    robot: Robot,
+    model: mujoco.MjModel,
+) -> Scene:
+    """The Scene a parsed scene file, its model text and its robot declare."""
+    objects, camera, scale, success = _parse(raw, where, yaml_text)
+    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera.name) < 0:
+        raise SceneError(f"{where}: camera {camera.name!r} not in the MJCF")
+    return Scene(
+        name=str(raw["name"]),
+        yaml_path=None,
+        yaml_text=yaml_text,
+        mjcf=mjcf,
+        digest=_digest(yaml_text, mjcf),
+        objects=objects,
+        camera=camera,
+        scale=scale,
+        robot=robot,
+        success=success,
+        description=str(raw.get("description", "")),
+        variants=_variants(raw, objects, where, yaml_text),
+    )
+
+
+def _replace_path(scene: Scene, path: Path) -> Scene:
+    from dataclasses import replace
+
+    return replace(scene, yaml_path=path)
+
+
+def _digest(yaml_text: str, mjcf_text: str) -> str:
+    h = hashlib.sha256()
+    h.update(yaml_text.encode())
+    h.update(b"\0")
+    h.update(mjcf_text.encode())
+    return "sha256:" + h.hexdigest()
+
+
+def _yaw_quat(yaw: float) -> list[float]:
+    return [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
+
+
+MUG_HANDLE_SPAN = 0.3
+"""A mug's handle spans z = ±this × height about the centre: its top is 20 % of the height
+below the rim, so the top layer perception sees is the rim alone."""
+MUG_HANDLE_BAR = 0.01
+"""Thickness of the handle's bars [m] (at most a third of the handle's reach)."""
+MUG_HANDLE_WIDTH = 0.012
+"""Width of the handle across the mug [m] (at most the body's radius)."""
+
+
+def _mug_parts(sx: float, sy: float, sz: float) -> list[tuple[Any, list[float], list[float]]]:
+    """A mug's primitives ``(type, half size, pos)`` from its half extents [m].
+
+    A solid cylinder (diameter ``2 sy``) at the -x end of the bounding box, and on its +x
+    side a handle reaching ``2 (sx - sy)`` out of it: a loop of three boxes (upper arm,
+    outer bar, lower arm) whose top is below the rim.
+    """
+    box, cyl = mujoco.mjtGeom.mjGEOM_BOX, mujoco.mjtGeom.mjGEOM_CYLINDER
+    r, reach = sy, 2 * (sx - sy)
+    t = min(MUG_HANDLE_BAR, reach / 3)
+    w = min(MUG_HANDLE_WIDTH, r) / 2
+    # The arms start where their corners meet the curved wall, so they neither leave a gap
+    # nor bury much volume (the mass is shared by volume) inside the body.
+    x0 = sx - reach - (r - math.sqrt(r * r - w * w))
+    top = MUG_HANDLE_SPAN * 2 * sz
+    arm = (sx - x0) / 2
+    return [
+        (cyl, [r, sz, 0], [-reach / 2, 0, 0]),
+        (box, [arm, w, t / 2], [x0 + arm, 0, top - t / 2]),
+        (box, [t / 2, w, top - t], [sx - t / 2, 0, 0]),
+        (box, [arm, w, t / 2], [x0 + arm, 0, -top + t / 2]),
+    ]
+
+
+def _add_object(spec: mujoco.MjSpec, obj: ObjectSpec) -> None:
+    """Add ``obj`` as a body of primitives; free unless ``obj.fixed``."""
+    x, y, z, yaw = obj.pose
+    body = spec.worldbody.add_body(name=obj.name, pos=[x, y, z], quat=_yaw_quat(yaw))
+    if not obj.fixed:
+        body.add_freejoint(name=f"{obj.name}_joint")
+    sx, sy, sz = (s / 2 for s in obj.size)
+    box, cyl = mujoco.mjtGeom.mjGEOM_BOX, mujoco.mjtGeom.mjGEOM_CYLINDER
+    common = dict(
+        rgba=list(obj.rgba),
+        condim=4,
+        friction=[1.2, 0.02, 0.002],
+        solref=[0.004, 1],
+        solimp=[0.95, 0.99, 0.001, 0.5, 2],
+    )
+    parts: list[tuple[Any, list[float], list[float]]] = []  # (type, half size, pos)
+    if obj.shape == "box":
+        parts = [(box, [sx, sy, sz], [0, 0, 0])]
+    elif obj.shape == "cylinder":
+        parts = [(cyl, [sx, sz, 0], [0, 0, 0])]
+    elif obj.shape == "pyramid":
+        # Stacked boxes shrinking towards the top; each step a third of the height.
+        h = sz * 2 / PYRAMID_STEPS
+        for k in range(PYRAMID_STEPS):
+            f = 1.0 - k / PYRAMID_STEPS
+            parts.append((box, [sx * f, sy * f, h / 2], [0, 0, -sz + h * (k + 0.5)]))
+    elif obj.shape == "mug":
+        parts = _mug_parts(sx, sy, sz)
+    elif obj.shape == "open_box":
+        w = obj.wall / 2
+        parts = [
+            (box, [sx, sy, w], [0, 0, -sz + w]),
+            (box, [w, sy, sz], [sx - w, 0, 0]),
+            (box, [w, sy, sz], [-sx + w, 0, 0]),
+            (box, [sx - 2 * w, w, sz], [0, sy - w, 0]),
+            (box, [sx - 2 * w, w, sz], [0, -sy + w, 0]),
+        ]
+    elif obj.shape == "scale":
+        # A housing (part of the static body) and a platform body on top whose force sensor
+        # reads what rests on it; the platform is welded, so the reading is the static load.
+        body.add_geom(
+            type=box,
+            size=[sx, sy, sz * 0.6],
+            pos=[0, 0, -sz * 0.4],
+            rgba=[0.2, 0.2, 0.22, 1],
+            mass=1.0,
+        )
+        plat = body.add_body(name=f"{obj.name}_platform", pos=[0, 0, sz * 0.6])
+        plat.add_geom(type=box, size=[sx * 0.95, sy * 0.95, sz * 0.4], mass=obj.mass, **common)
+        plat.add_site(name=f"{obj.name}_site", pos=[0, 0, 0])
+        spec.add_sensor(
+            name=f"{obj.name}_force",
+            type=mujoco.mjtSensor.mjSENS_FORCE,
+            objtype=mujoco.mjtObj.mjOBJ_SITE,
+            objname=f"{obj.name}_site",
+        )
+        return
+    total = sum(
+        8 * s[0] * s[1] * s[2] if t == box else math.pi * s[0] ** 2 * 2 * s[1] for t, s, _ in parts
+    )
+    for i, (t, half, pos) in enumerate(parts):
+        vol = 8 * half[0] * half[1] * half[2] if t == box else math.pi * half[0] ** 2 * 2 * half[1]
+        body.add_geom(
+            name=f"{obj.name}_geom{i}",
+            type=t,
+            size=half,
+            pos=pos,
+            mass=obj.mass * vol / total,
+            **common,
+        )

@@ -1,0 +1,345 @@
+"""The simulation: a scene in MuJoCo, stepped one control period at a time, and its sensors.
+
+Everything the robot perceives goes through :meth:`Sim.render_camera`, :meth:`Sim.weight`,
+:meth:`Sim.joint_state` and :meth:`Sim.poi`. :meth:`Sim.ground_truth` and :meth:`Sim.success`
+read simulator state and are for evaluation only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from smccli.errors import SceneError
+from smccli.world.controller import CartesianController, poi_pose
+from smccli.world.robot import robot_geoms
+from smccli.world.robot_model import RobotModel
+from smccli.world.scene import Condition, Layout, ObjectSpec, Scene, nominal_layout
+from smccli.world.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
+
+CONTROL_PERIOD = 0.01
+"""Control period [s] (100 Hz); the physics timestep comes from the model (2 ms)."""
+GRAVITY = 9.81
+PARK_X, PARK_Y0, PARK_DY = 2.5, -2.0, 0.4
+"""Where objects absent from a layout rest: on the floor, behind the camera [m]."""
+FLOOR_Z = -0.75
+"""Height of the floor plane of the built-in scenes [m]."""
+
+
+@dataclass(frozen=True, slots=True)
+class Success:
+    """Outcome of the scene's success criterion; truthy when the task succeeded."""
+
+    ok: bool
+    """Whether a task's criterion holds."""
+    reason: str
+    """Which task and condition held, or why none did."""
+
+    def __bool__(self) -> bool:
+        return self.ok
+
+
+class Sim:
+    """A scene in MuJoCo with the Cartesian controller between commands and joint servos."""
+
+    def __init__(self, scene: Scene, layout: Layout | None = None) -> None:
+        self.scene = scene
+        self.model = scene.model()
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self.control_period = CONTROL_PERIOD
+        self.n_substeps = max(1, round(CONTROL_PERIOD / m.opt.timestep))
+        robot = self.robot = scene.robot
+        self.controller = CartesianController(m, robot, control_period=CONTROL_PERIOD)
+        self.poi_id = self.controller.site_id
+        act = mujoco.mjtObj.mjOBJ_ACTUATOR
+        self._arm_act = np.array([self._id(act, n) for n in robot.arm_actuators])
+        self._grip_act = self._id(act, robot.gripper.actuator)
+        self._jnames = robot.arm_joints + robot.gripper.joints
+        joints = [self._id(mujoco.mjtObj.mjOBJ_JOINT, n) for n in self._jnames]
+        self._jq = np.array([m.jnt_qposadr[j] for j in joints])
+        self._jv = np.array([m.jnt_dofadr[j] for j in joints])
+        n_arm = len(robot.arm_joints)
+        self._arm_q = self._jq[:n_arm]
+        self._finger_q = self._jq[n_arm:]
+        self._finger_v = self._jv[n_arm:]
+        self._cam_id = self._id(mujoco.mjtObj.mjOBJ_CAMERA, scene.camera.name)
+        self._body = {o.name: self._id(mujoco.mjtObj.mjOBJ_BODY, o.name) for o in scene.objects}
+        self._free_qadr = {}
+        for o in scene.objects:
+            if not o.fixed:
+                jid = m.body_jntadr[self._body[o.name]]
+                self._free_qadr[o.name] = (m.jnt_qposadr[jid], m.jnt_dofadr[jid])
+        self._scale_sensor = None
+        if scene.scale is not None:
+            sid = self._id(mujoco.mjtObj.mjOBJ_SENSOR, f"{scene.scale}_force")
+            self._scale_sensor = m.sensor_adr[sid]
+        self._robot_geoms = robot_geoms(robot, m)
+        self._renderer: mujoco.Renderer | None = None
+        self._robot: RobotModel | None = None
+        self._last = PoiCommand(0.0, np.zeros(4), 1.0)
+        self.reset(layout)
+
+    def _id(self, kind: mujoco.mjtObj, name: str) -> int:
+        i = mujoco.mj_name2id(self.model, kind, name)
+        if i < 0:
+            raise SceneError(
+                f"scene {self.scene.name}: model has no {kind.name[6:].lower()} {name!r}"
+            )
+        return i
+
+    # --- state -------------------------------------------------------------------------
+
+    def reset(self, layout: Layout | None = None) -> None:
+        """Robot at home with the gripper open, objects at ``layout`` (default nominal)."""
+        m, d = self.model, self.data
+        mujoco.mj_resetData(m, d)
+        if layout is None:
+            # A scene with variants has look-alike objects sharing a nominal pose: show one.
+            first = self.scene.variants[0][0] if self.scene.variants else None
+            layout = nominal_layout(self.scene, first)
+        for name, (x, y, z, yaw) in layout.items():
+            if name not in self._body:
+                valid = ", ".join(self._body)
+                raise SceneError(f"layout: no object {name!r} in scene {self.scene.name} ({valid})")
+            quat = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
+            if name in self._free_qadr:
+                qa, _ = self._free_qadr[name]
+                d.qpos[qa : qa + 7] = [x, y, z, *quat]
+            else:  # static: move the body itself (the scale, fixed bins)
+                m.body_pos[self._body[name]] = [x, y, z]
+                m.body_quat[self._body[name]] = quat
+        # Objects the layout leaves out (another variant) rest on the floor behind the
+        # camera, out of its view and out of the workspace.
+        parked = [o for o in self.scene.objects if o.name not in layout and not o.fixed]
+        for i, o in enumerate(parked):
+            qa, _ = self._free_qadr[o.name]
+            d.qpos[qa : qa + 7] = [
+                PARK_X,
+                PARK_Y0 + PARK_DY * i,
+                FLOOR_Z + o.size[2] / 2,
+                1.0,
+                0.0,
+                0.0,
+                0.0,
+            ]
+        self.present = tuple(n for n in layout)
+        """Names of the objects the layout placed (evaluation only)."""
+        home, grip = self.robot.home_array(), self.robot.gripper
+        d.qpos[self._arm_q] = home
+        d.qpos[self._finger_q] = grip.open
+        self.controller.reset(home)
+        d.ctrl[self._arm_act] = home
+        d.ctrl[self._grip_act] = grip.open
+        mujoco.mj_forward(m, d)
+        self._last = PoiCommand(0.0, self.poi(), 1.0)
+        # Tare: the empty scale's reading is the platform's own weight.
+        self._tare = 0.0 if self._scale_sensor is None else self._scale_force()
+
+    @property
+    def t(self) -> float:
+        """Simulation time [s]."""
+        return float(self.data.time)
+
+    def step(self, cmd: PoiCommand) -> None:
+        """Advance one control period (10 ms) towards ``cmd``."""
+        self._last = cmd
+        self.data.ctrl[self._arm_act] = self.controller.update(np.asarray(cmd.target, float))
+        self.data.ctrl[self._grip_act] = self.robot.gripper.target(cmd.gripper)
+        mujoco.mj_step(self.model, self.data, nstep=self.n_substeps)
+
+    def settle(self, seconds: float) -> None:
+        """Hold the last command for ``seconds`` [s] (lets objects come to rest)."""
+        for _ in range(max(0, round(seconds / self.control_period))):
+            self.step(PoiCommand(self.t, self._last.target, self._last.gripper))
+
+    # --- robot sensors -----------------------------------------------------------------
+
+    def poi(self) -> np.ndarray:
+        """POI ``[x, y, z, yaw]`` [m, m, m, rad], yaw in (−π, π]."""
+        return poi_pose(self.data, self.poi_id)
+
+    def gripper_opening(self) -> float:
+        """Distance between the finger pads over its maximum, in [0, 1]."""
+        return self.robot.gripper.opening(self.data.qpos[self._finger_q])
+
+    def gripper_speed(self) -> float:
+        """Rate of change of :meth:`gripper_opening` [1/s]."""
+        return self.robot.gripper.opening_rate(self.data.qvel[self._finger_v])
+
+    def joint_state(self) -> JointState:
+        """Positions, velocities and actuator efforts of the arm and finger joints."""
+        d = self.data
+        return JointState(
+            t=self.t,
+            names=self._jnames,
+            position=d.qpos[self._jq].copy(),
+            velocity=d.qvel[self._jv].copy(),
+            effort=d.qfrc_actuator[self._jv].copy(),
+        )
+
+    def weight(self) -> float | None:
+        """Mass resting on the scale [kg], tared; None if the scene has no scale."""
+        if self._scale_sensor is None:
+            return None
+        return (self._scale_force() - self._tare) / GRAVITY
+
+    def _scale_force(self) -> float:
+        # The force sensor gives what the platform's parent exerts on it, in the site frame
+        # (z up): at rest it carries the platform and everything on it.
+        a = self._scale_sensor
+        return float(self.data.sensordata[a + 2])  # type: ignore[operator]
+
+    def robot_geometry(self) -> RobotGeometry:
+        """Bounding spheres of the robot's moving links from its own kinematics (self-filter).
+
+        Computed as compile computes it from logged joint states (a kinematic copy of the
+        robot posed from the joint readings, :mod:`smccli.world.robot_model`), so replay perceives
+        exactly as compile did.
+        """
+        js = self.joint_state()
+        if self._robot is None:
+            self._robot = RobotModel.from_mjcf(self.scene.mjcf, js.names)
+        return self._robot.geometry_for(js.position)
+
+    # --- camera ------------------------------------------------------------------------
+
+    def render_camera(self) -> CameraFrame:
+        """RGB and metric depth (along the optical axis) from the scene's sensor camera."""
+        cam = self.scene.camera
+        if self._renderer is None:
+            self._renderer = mujoco.Renderer(self.model, cam.height, cam.width)
+            self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
+            self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
+        r = self._renderer
+        opt = mujoco.MjvOption()
+        opt.geomgroup[:] = 1
+        opt.sitegroup[:] = 0  # sites (the POI marker) are not seen by a real camera
+        r.update_scene(self.data, camera=self._cam_id, scene_option=opt)
+        rgb = r.render().copy()
+        r.enable_depth_rendering()
+        r.update_scene(self.data, camera=self._cam_id, scene_option=opt)
+        # mujoco.Renderer already linearises the depth buffer to metres along the optical
+        # axis (z-depth, not ray length), which is what CameraFrame wants.
+        depth = r.render().astype(np.float32)
+        r.disable_depth_rendering()
+        far = self.model.vis.map.zfar * self.model.stat.extent
+        depth[depth >= 0.999 * far] = 0.0
+        return CameraFrame(
+            t=self.t,
+            rgb=rgb,
+            depth=depth,
+            K=self.camera_matrix(),
+            T_world_camera=self.camera_pose(),
+            frame_id="camera",
+        )
+
+    def camera_matrix(self) -> np.ndarray:
+        """Pinhole intrinsics from the camera's vertical field of view, shape (3, 3) [px].
+
+        Pixel centres are at integer coordinates (OpenCV convention).
+        """
+        cam = self.scene.camera
+        fovy = math.radians(self.model.cam_fovy[self._cam_id])
+        f = 0.5 * cam.height / math.tan(fovy / 2)
+        return np.array([[f, 0.0, (cam.width - 1) / 2], [0.0, f, (cam.height - 1) / 2], [0, 0, 1]])
+
+    def camera_pose(self) -> np.ndarray:
+        """T_world_camera, shape (4, 4), optical frame (x right, y down, z forward)."""
+        T = np.eye(4)
+        # MuJoCo cameras look along −z with y up: flip y and z for the optical convention.
+        T[:3, :3] = self.data.cam_xmat[self._cam_id].reshape(3, 3) @ np.diag([1.0, -1.0, -1.0])
+        T[:3, 3] = self.data.cam_xpos[self._cam_id]
+        return T
+
+    def close(self) -> None:
+        """Free the renderer's GL context."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    # --- evaluation only ---------------------------------------------------------------
+
+    def ground_truth(self) -> dict[str, np.ndarray]:
+        """Object poses ``[x, y, z, qw, qx, qy, qz]`` (evaluation only, never for perception)."""
+        d = self.data
+        return {n: np.concatenate([d.xpos[b], d.xquat[b]]) for n, b in self._body.items()}
+
+    def object_pose(self, name: str) -> np.ndarray:
+        """Object ``[x, y, z, yaw]`` (for the simulated operator and evaluation)."""
+        b = self._body[name]
+        R = self.data.xmat[b].reshape(3, 3)
+        return np.array([*self.data.xpos[b], math.atan2(R[1, 0], R[0, 0])])
+
+    def object_speed(self, name: str) -> float:
+        """Linear speed of an object's body [m/s]."""
+        if name not in self._free_qadr:
+            return 0.0
+        _, va = self._free_qadr[name]
+        return float(np.linalg.norm(self.data.qvel[va : va + 3]))
+
+    def holds(self, cond: Condition) -> tuple[bool, str]:
+        """Whether ``cond`` holds now: the object rests on top of / inside the target."""
+        obj, tgt = self.scene.object(cond.object), self.scene.object(cond.target)
+        po, pt = self.object_pose(obj.name), self.object_pose(tgt.name)
+        # Object centre in the target's yawed frame.
+        c, s = math.cos(pt[3]), math.sin(pt[3])
+        dx, dy = po[0] - pt[0], po[1] - pt[1]
+        lx, ly = c * dx + s * dy, -s * dx + c * dy
+        bottom = po[2] - _half_height(obj)
+        t_top = pt[2] + tgt.size[2] / 2
+        t_bottom = pt[2] - tgt.size[2] / 2
+        resting = self.object_speed(obj.name) < 0.02 and self._released(obj)
+        if cond.relation == "on_top_of":
+            inside_xy = _in_footprint(tgt, lx, ly, margin=0.0)
+            ok = inside_xy and abs(bottom - t_top) < 0.015 and resting
+            why = f"{obj.name} {'on' if ok else 'not resting on'} {tgt.name}"
+        else:  # inside
+            inner = tgt.wall if tgt.shape == "open_box" else 0.0
+            inside_xy = _in_footprint(tgt, lx, ly, margin=inner)
+            ok = inside_xy and t_bottom - 0.005 < bottom < t_top and resting
+            why = f"{obj.name} {'inside' if ok else 'not resting inside'} {tgt.name}"
+        return ok, why
+
+    def _released(self, obj: ObjectSpec) -> bool:
+        # Resting means the gripper is not holding it: no finger touches the object.
+        b = self._body[obj.name]
+        fingers = {self.model.geom_bodyid[g] for g in self._robot_geoms}
+        for i in range(self.data.ncon):
+            con = self.data.contact[i]
+            b1, b2 = self.model.geom_bodyid[con.geom1], self.model.geom_bodyid[con.geom2]
+            if (b1 == b and b2 in fingers) or (b2 == b and b1 in fingers):
+                return False
+        return True
+
+    def success(self, task: str | None = None) -> Success:
+        """The scene's success criterion for ``task`` (default: any task succeeds)."""
+        crits = [c for c in self.scene.success if task is None or c.task == task]
+        if not crits:
+            valid = ", ".join(c.task for c in self.scene.success)
+            raise SceneError(f"scene {self.scene.name}: no task {task!r} (tasks: {valid})")
+        reasons = []
+        for crit in crits:
+            held = [self.holds(c) for c in crit.any_of]
+            bad = [self.holds(c) for c in crit.none_of]
+            if any(ok for ok, _ in bad):
+                reasons.append(f"{crit.task}: " + "; ".join(w for ok, w in bad if ok))
+                continue
+            hit = [w for ok, w in held if ok]
+            if hit:
+                return Success(True, f"{crit.task}: {hit[0]}")
+            reasons.append(f"{crit.task}: " + "; ".join(w for _, w in held))
+        return Success(False, " | ".join(reasons))
+
+
+def _half_height(obj: ObjectSpec) -> float:
+    return obj.size[2] / 2
+
+
+def _in_footprint(tgt: ObjectSpec, lx: float, ly: float, margin: float) -> bool:
+    if tgt.shape == "cylinder":
+        return math.hypot(lx, ly) < tgt.size[0] / 2 - margin
+    return abs(lx) < tgt.size[0] / 2 - margin and abs(ly) < tgt.size[1] / 2 - margin
