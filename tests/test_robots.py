@@ -156,6 +156,11 @@ BROKEN_ROBOTS = {
         ["arm.home[1] (line 8)", "outside shoulder_lift's limits [-1.9, 1.9]"],
     ),
     "schema": ("  actuator: jaw\n", "", ["gripper (line 11)", "actuator"]),
+    "base-joint": (
+        "geom_group: 3",
+        "base: {joints: [x, y, yaw], actuators: [ax, ay, ayaw]}\ngeom_group: 3",
+        ["base.joints[0] (line 14)", "no joint 'x' in robot.xml"],
+    ),
     "geom-group": (
         "geom_group: 3",
         "geom_group: 2",

@@ -53,6 +53,12 @@ class Sim:
         self.control_period = CONTROL_PERIOD
         self.n_substeps = max(1, round(CONTROL_PERIOD / m.opt.timestep))
         robot = self.robot = scene.robot
+        if robot.base is not None:
+            # Declared and checked against the MJCF, but nothing drives it yet.
+            raise SceneError(
+                f"scene {scene.name}: robot {robot.name} has a mobile base; smc drives fixed "
+                "arms only so far"
+            )
         self.controller = CartesianController(m, robot, control_period=CONTROL_PERIOD)
         self.poi_id = self.controller.site_id
         act = mujoco.mjtObj.mjOBJ_ACTUATOR
