@@ -5,6 +5,10 @@ self-filter -> table plane removal (RANSAC) -> DBSCAN -> per cluster a colour hi
 an upright oriented box (centroid, yaw, extents). :func:`d_cluster` compares two clusters
 (1 = clearly different, T_hP = 0.1 separates same from different);
 :func:`salient_cluster` picks the cluster at the POI (eq. 20-22).
+
+The mobile half (paper 4.2): a 2-D lidar scan (SL, :mod:`~smccli.perception.scan`) with
+:func:`align_scans`, :func:`scan_distance` and the goal mapping of eq. 38-39, and the room's
+colour histogram (SI, :mod:`~smccli.perception.room`).
 """
 
 from smccli.perception.cloud import cloud_from_frame
@@ -17,12 +21,28 @@ from smccli.perception.clusters import (
 from smccli.perception.distance import d_cluster, d_extents, d_scalar
 from smccli.perception.histogram import d_histogram, hsv_histogram
 from smccli.perception.params import PerceptionParams
+from smccli.perception.room import d_room, room_histogram
 from smccli.perception.saliency import DEFAULT_EPSILON, salient_cluster, scale_reading
+from smccli.perception.scan import (
+    Scan2D,
+    ScanAlignment,
+    ScanParams,
+    align_scans,
+    goal_in_lidar,
+    map_goal,
+    scan_distance,
+    scan_from_dict,
+    scan_to_dict,
+)
 
 __all__ = [
     "DEFAULT_EPSILON",
     "Cluster",
     "PerceptionParams",
+    "Scan2D",
+    "ScanAlignment",
+    "ScanParams",
+    "align_scans",
     "cloud_from_frame",
     "cluster_from_dict",
     "cluster_to_dict",
@@ -30,8 +50,15 @@ __all__ = [
     "d_cluster",
     "d_extents",
     "d_histogram",
+    "d_room",
     "d_scalar",
+    "goal_in_lidar",
     "hsv_histogram",
+    "map_goal",
+    "room_histogram",
     "salient_cluster",
     "scale_reading",
+    "scan_distance",
+    "scan_from_dict",
+    "scan_to_dict",
 ]
