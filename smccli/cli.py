@@ -65,12 +65,18 @@ def scenes() -> None:
 
 
 @app.command()
-def robots() -> None:
-    """List the built-in robots: degrees of freedom, gripper, sensors."""
-    from smccli.world.robot import list_robots
+def robots(
+    files: Annotated[
+        list[Path] | None,
+        typer.Argument(help="Robot files of your own (robot.yaml) to check and list too."),
+    ] = None,
+) -> None:
+    """List the built-in robots (and check your own): degrees of freedom, gripper, sensors."""
+    from smccli.world.robot import list_robots, load_robot
 
+    found = list_robots() + [load_robot(f) for f in files or []]
     table = Table("robot", "DoF", "gripper", "sensors", "description")
-    for r in list_robots():
+    for r in found:
         g = r.gripper
         gripper = f"{len(g.joints)} fingers, {g.closed:g}-{g.open:g} per finger ({g.actuator})"
         mounted = [f"{s.type} {s.name}" for s in r.sensors]

@@ -35,6 +35,19 @@ def test_smc_robots_lists_two_arms() -> None:
             assert "2 fingers" in row and "joint encoders" in row, row
 
 
+def test_smc_robots_checks_a_users_robot_file(tmp_path: Path) -> None:
+    proc = smc("robots", SIX / "robot.yaml")
+    assert proc.returncode == 0, proc.stderr
+    assert any(line.split("│")[1].strip() == "six" for line in proc.stdout.splitlines()[3:-1])
+    old, new, parts = BROKEN_ROBOTS["unknown-site"]
+    _broken_copy(tmp_path, old, new)
+    robot_file = tmp_path / "robots" / "six" / "robot.yaml"
+    proc = smc("robots", robot_file)
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert str(robot_file) in lines[0] and all(p in lines[0] for p in parts), lines[0]
+
+
 @pytest.mark.parametrize("name", builtin_robot_names())
 def test_builtin_robots_fit_their_mjcf(name: str) -> None:
     robot = load_robot(name)
