@@ -78,7 +78,11 @@ def robots(
     table = Table("robot", "DoF", "gripper", "sensors", "description")
     for r in found:
         g = r.gripper
-        gripper = f"{len(g.joints)} fingers, {g.closed:g}-{g.open:g} per finger ({g.actuator})"
+        gripper = (
+            "none"
+            if g is None
+            else f"{len(g.joints)} fingers, {g.closed:g}-{g.open:g} per finger ({g.actuator})"
+        )
         mounted = [f"{s.type} {s.name}" for s in r.sensors]
         sensors = ", ".join(["joint encoders", *mounted])
         dof = f"{r.dof}" + (" (base 3)" if r.base else "")

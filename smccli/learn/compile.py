@@ -107,7 +107,7 @@ def fragments(
     the log's (default: read from its attachments)."""
     robot = robot or scene_of_log(log.attachments, log.path).robot
     t_end = float(log.poi_t[-1]) if len(log.poi_t) else 0.0
-    t_f, v_f = _finger_speed(log, robot.gripper.joints)
+    t_f, v_f = _finger_speed(log, robot.gripper.joints if robot.gripper else ())
     marks = tuple(m.t for m in log.marks if m.source == "operator")
     trace = trace_from_commands(log.commands, t_f, v_f, log.weight_t, log.weight, marks, t_end)
     return segment(
@@ -290,6 +290,11 @@ def compile_logs(
                 skipped.append(path)
                 continue
             scene = scene_of_log(log.attachments, path)
+            if not scene.robot.arm_joints:
+                raise LogError(
+                    f"{path}: robot {scene.robot.name!r} has no arm; compile learns from arm "
+                    "demonstrations only so far"
+                )
             model = scene.model()
             robot = robot_identity(scene, model)
             if tree.robot and tree.robot != robot:

@@ -302,6 +302,8 @@ class ScriptOperator:
             assert step.position is not None
             yaw = self._target[3] if step.yaw is None else step.yaw
             goal = np.array([*step.position, yaw])
+        if self.sim.robot.gripper is None:  # a mobile base: its heading is what it is
+            return goal
         # The gripper is symmetric under a half turn: take the yaw (mod π) nearest the
         # wrist's comfortable yaw, which points along the arm (base yaw = atan2(y, x)).
         comfort = math.atan2(goal[1], goal[0])

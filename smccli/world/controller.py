@@ -225,12 +225,17 @@ class CartesianController:
 def reachable(
     model: mujoco.MjModel, robot: Robot, target: np.ndarray, *, min_z: float = 0.01
 ) -> bool:
-    """Whether the POI can reach ``target`` [x, y, z, yaw] pointing down (IK converges).
+    """Whether the POI can reach ``target`` [x, y, z, yaw] pointing down (IK converges); a
+    mobile base without an arm reaches any finite pose (walls stop it, not its joints).
 
     ``min_z`` [m]: lowest POI height above the table accepted (keeps the fingertips out).
     """
     target = np.asarray(target, dtype=float)
-    if target.shape != (4,) or not np.all(np.isfinite(target)) or target[2] < min_z:
+    if target.shape != (4,) or not np.all(np.isfinite(target)):
+        return False
+    if not robot.arm_joints:  # a mobile base: its joints take the pose as it is
+        return True
+    if target[2] < min_z:
         return False
     _, ok = CartesianController(model, robot).solve(target)
     return ok

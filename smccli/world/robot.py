@@ -83,15 +83,16 @@ class Robot:
     name: str
     yaml_text: str
     """The robot file's text, verbatim (logs attach it as ``robot.yaml``)."""
-    arm_joints: tuple[str, ...]
-    """Arm joints, base to flange."""
-    arm_actuators: tuple[str, ...]
-    """Their position actuators, same order."""
-    home: tuple[float, ...]
-    """Home posture [rad], one per arm joint."""
     poi: str
     """The POI site."""
-    gripper: Gripper
+    arm_joints: tuple[str, ...] = ()
+    """Arm joints, base to flange (empty: a mobile base without an arm)."""
+    arm_actuators: tuple[str, ...] = ()
+    """Their position actuators, same order."""
+    home: tuple[float, ...] = ()
+    """Home posture [rad], one per arm joint."""
+    gripper: Gripper | None = None
+    """The gripper (with an arm), else None."""
     base: Base | None = None
     geom_group: int = 3
     """MJCF geom group holding the robot's own geoms."""
@@ -110,7 +111,8 @@ class Robot:
     @property
     def joint_names(self) -> tuple[str, ...]:
         """The joints a log's ``/robot/joint_states`` carries: base, arm, then fingers."""
-        return (self.base.joints if self.base else ()) + self.arm_joints + self.gripper.joints
+        fingers = self.gripper.joints if self.gripper else ()
+        return (self.base.joints if self.base else ()) + self.arm_joints + fingers
 
     def home_array(self) -> np.ndarray:
         """Home posture, shape (n_arm,) [rad]."""
@@ -182,16 +184,17 @@ def _document(text: str, where: str, error_cls: type[SmcError]) -> YamlDocument:
 
 def _robot(doc: YamlDocument, text: str, path: Path | None, mjcf: Path | None) -> Robot:
     d: dict[str, Any] = doc.data
-    g = d["gripper"]
-    base = d.get("base")
+    arm, g, base = d.get("arm") or {}, d.get("gripper"), d.get("base")
     return Robot(
         name=str(d["name"]),
         yaml_text=text,
-        arm_joints=tuple(str(j) for j in d["arm"]["joints"]),
-        arm_actuators=tuple(str(a) for a in d["arm"]["actuators"]),
-        home=tuple(float(v) for v in d["arm"]["home"]),
+        arm_joints=tuple(str(j) for j in arm.get("joints", ())),
+        arm_actuators=tuple(str(a) for a in arm.get("actuators", ())),
+        home=tuple(float(v) for v in arm.get("home", ())),
         poi=str(d["poi"]),
-        gripper=Gripper(
+        gripper=None
+        if g is None
+        else Gripper(
             joints=tuple(str(j) for j in g["joints"]),
             actuator=str(g["actuator"]),
             closed=float(g["opening"][0]),
@@ -237,8 +240,10 @@ def check_robot(
     refs += [(("arm", "joints", i), "joint", n) for i, n in enumerate(robot.arm_joints)]
     refs += [(("arm", "actuators", i), "actuator", n) for i, n in enumerate(robot.arm_actuators)]
     refs += [(("poi",), "site", robot.poi)]
-    refs += [(("gripper", "joints", i), "joint", n) for i, n in enumerate(robot.gripper.joints)]
-    refs += [(("gripper", "actuator"), "actuator", robot.gripper.actuator)]
+    if robot.gripper:
+        g = robot.gripper
+        refs += [(("gripper", "joints", i), "joint", n) for i, n in enumerate(g.joints)]
+        refs += [(("gripper", "actuator"), "actuator", g.actuator)]
     if robot.base:
         refs += [(("base", "joints", i), "joint", n) for i, n in enumerate(robot.base.joints)]
         refs += [
@@ -270,7 +275,7 @@ def check_robot(
                 f"{doc.source}: {doc.where(('arm', 'home', i))}: {q:g} rad is outside "
                 f"{name}'s limits [{lo:g}, {hi:g}]"
             )
-    if robot.gripper.open == robot.gripper.closed:
+    if robot.gripper and robot.gripper.open == robot.gripper.closed:
         raise error_cls(
             f"{doc.source}: {doc.where(('gripper', 'opening'))}: closed and open are equal"
         )
@@ -324,7 +329,7 @@ def kinematics_digest(robot: Robot, model: mujoco.MjModel) -> str:
                 f"joint {int(model.jnt_type[j])} {fmt(model.jnt_axis[j])} {fmt(model.jnt_pos[j])}"
                 f" {fmt(model.jnt_range[j])}"
             )
-    for name in robot.gripper.joints:
+    for name in robot.gripper.joints if robot.gripper else ():
         j = model.joint(name).id
         rows.append(
             f"finger {int(model.jnt_type[j])} {fmt(model.jnt_axis[j])} {fmt(model.jnt_range[j])}"

@@ -14,7 +14,8 @@ import mujoco
 import numpy as np
 
 from smccli.errors import SceneError
-from smccli.world.controller import CartesianController, poi_pose
+from smccli.world.controller import CartesianController, poi_pose, wrap
+from smccli.world.lidar import Lidar, LidarReading
 from smccli.world.robot import robot_geoms
 from smccli.world.robot_model import RobotModel
 from smccli.world.scene import Condition, Layout, ObjectSpec, Scene, nominal_layout
@@ -45,7 +46,9 @@ class Success:
 class Sim:
     """A scene in MuJoCo with the Cartesian controller between commands and joint servos."""
 
-    def __init__(self, scene: Scene, layout: Layout | None = None) -> None:
+    def __init__(
+        self, scene: Scene, layout: Layout | None = None, base_pose: np.ndarray | None = None
+    ) -> None:
         self.scene = scene
         self.model = scene.model()
         self.data = mujoco.MjData(self.model)
@@ -53,25 +56,41 @@ class Sim:
         self.control_period = CONTROL_PERIOD
         self.n_substeps = max(1, round(CONTROL_PERIOD / m.opt.timestep))
         robot = self.robot = scene.robot
-        if robot.base is not None:
-            # Declared and checked against the MJCF, but nothing drives it yet.
+        if robot.base is not None and robot.arm_joints:
+            # Declared and checked against the MJCF; base and arm together come with the
+            # mobile manipulator (two POIs, DESIGN.md 9).
             raise SceneError(
-                f"scene {scene.name}: robot {robot.name} has a mobile base; smc drives fixed "
-                "arms only so far"
+                f"scene {scene.name}: robot {robot.name} has a mobile base and an arm; smc "
+                "drives a fixed arm or a mobile base so far"
             )
-        self.controller = CartesianController(m, robot, control_period=CONTROL_PERIOD)
-        self.poi_id = self.controller.site_id
+        self.poi_id = self._id(mujoco.mjtObj.mjOBJ_SITE, robot.poi)
+        self.controller = (
+            CartesianController(m, robot, control_period=CONTROL_PERIOD)
+            if robot.arm_joints
+            else None
+        )
         act = mujoco.mjtObj.mjOBJ_ACTUATOR
-        self._arm_act = np.array([self._id(act, n) for n in robot.arm_actuators])
-        self._grip_act = self._id(act, robot.gripper.actuator)
-        self._jnames = robot.arm_joints + robot.gripper.joints
+        base = robot.base.joints if robot.base else ()
+        fingers = robot.gripper.joints if robot.gripper else ()
+        self._jnames = robot.joint_names
         joints = [self._id(mujoco.mjtObj.mjOBJ_JOINT, n) for n in self._jnames]
-        self._jq = np.array([m.jnt_qposadr[j] for j in joints])
-        self._jv = np.array([m.jnt_dofadr[j] for j in joints])
-        n_arm = len(robot.arm_joints)
-        self._arm_q = self._jq[:n_arm]
-        self._finger_q = self._jq[n_arm:]
-        self._finger_v = self._jv[n_arm:]
+        self._jq = np.array([m.jnt_qposadr[j] for j in joints], dtype=int)
+        self._jv = np.array([m.jnt_dofadr[j] for j in joints], dtype=int)
+        n_base, n_arm = len(base), len(robot.arm_joints)
+        self._base_q = self._jq[:n_base]
+        self._arm_q = self._jq[n_base : n_base + n_arm]
+        self._finger_q = self._jq[n_base + n_arm :]
+        self._finger_v = self._jv[n_base + n_arm :]
+        self._base_act = np.array(
+            [self._id(act, n) for n in (robot.base.actuators if robot.base else ())], dtype=int
+        )
+        self._arm_act = np.array([self._id(act, n) for n in robot.arm_actuators], dtype=int)
+        self._grip_act = self._id(act, robot.gripper.actuator) if robot.gripper else -1
+        assert len(fingers) == len(self._finger_q)
+        self._lidar = None
+        for s in robot.sensors:
+            if s.type == "lidar":
+                self._lidar = Lidar(m, s.target, ignore_group=robot.geom_group)
         self._cam_id = self._id(mujoco.mjtObj.mjOBJ_CAMERA, scene.camera.name)
         self._body = {o.name: self._id(mujoco.mjtObj.mjOBJ_BODY, o.name) for o in scene.objects}
         self._free_qadr = {}
@@ -87,7 +106,7 @@ class Sim:
         self._renderer: mujoco.Renderer | None = None
         self._robot: RobotModel | None = None
         self._last = PoiCommand(0.0, np.zeros(4), 1.0)
-        self.reset(layout)
+        self.reset(layout, base_pose)
 
     def _id(self, kind: mujoco.mjtObj, name: str) -> int:
         i = mujoco.mj_name2id(self.model, kind, name)
@@ -99,8 +118,10 @@ class Sim:
 
     # --- state -------------------------------------------------------------------------
 
-    def reset(self, layout: Layout | None = None) -> None:
-        """Robot at home with the gripper open, objects at ``layout`` (default nominal)."""
+    def reset(self, layout: Layout | None = None, base_pose: np.ndarray | None = None) -> None:
+        """Robot at home with the gripper open, objects at ``layout`` (default nominal), a
+        mobile base at ``base_pose`` ``[x, y, yaw]`` [m, m, rad] (default the origin)."""
+        base_pose = np.zeros(3) if base_pose is None else np.asarray(base_pose, dtype=float)
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         if layout is None:
@@ -134,12 +155,17 @@ class Sim:
             ]
         self.present = tuple(n for n in layout)
         """Names of the objects the layout placed (evaluation only)."""
-        home, grip = self.robot.home_array(), self.robot.gripper
-        d.qpos[self._arm_q] = home
-        d.qpos[self._finger_q] = grip.open
-        self.controller.reset(home)
-        d.ctrl[self._arm_act] = home
-        d.ctrl[self._grip_act] = grip.open
+        if self.controller is not None:
+            home = self.robot.home_array()
+            d.qpos[self._arm_q] = home
+            self.controller.reset(home)
+            d.ctrl[self._arm_act] = home
+        if self.robot.gripper is not None:
+            d.qpos[self._finger_q] = self.robot.gripper.open
+            d.ctrl[self._grip_act] = self.robot.gripper.open
+        if len(self._base_q):
+            d.qpos[self._base_q] = base_pose
+            d.ctrl[self._base_act] = base_pose
         mujoco.mj_forward(m, d)
         self._last = PoiCommand(0.0, self.poi(), 1.0)
         # Tare: the empty scale's reading is the platform's own weight.
@@ -151,10 +177,22 @@ class Sim:
         return float(self.data.time)
 
     def step(self, cmd: PoiCommand) -> None:
-        """Advance one control period (10 ms) towards ``cmd``."""
+        """Advance one control period (10 ms) towards ``cmd``.
+
+        An arm's POI target goes through the Cartesian controller; a mobile base's
+        ``[x, y, z, yaw]`` (z ignored) is its joints' target directly, the yaw unwrapped to
+        the turn nearest the current one (the hinge is continuous).
+        """
         self._last = cmd
-        self.data.ctrl[self._arm_act] = self.controller.update(np.asarray(cmd.target, float))
-        self.data.ctrl[self._grip_act] = self.robot.gripper.target(cmd.gripper)
+        target = np.asarray(cmd.target, float)
+        if self.controller is not None:
+            self.data.ctrl[self._arm_act] = self.controller.update(target)
+        if self.robot.gripper is not None:
+            self.data.ctrl[self._grip_act] = self.robot.gripper.target(cmd.gripper)
+        if len(self._base_act):
+            yaw_now = float(self.data.qpos[self._base_q[2]])
+            yaw = yaw_now + wrap(float(target[3]) - yaw_now)
+            self.data.ctrl[self._base_act] = [target[0], target[1], yaw]
         mujoco.mj_step(self.model, self.data, nstep=self.n_substeps)
 
     def settle(self, seconds: float) -> None:
@@ -169,12 +207,20 @@ class Sim:
         return poi_pose(self.data, self.poi_id)
 
     def gripper_opening(self) -> float:
-        """Distance between the finger pads over its maximum, in [0, 1]."""
+        """Distance between the finger pads over its maximum, in [0, 1] (1 without one)."""
+        if self.robot.gripper is None:
+            return 1.0
         return self.robot.gripper.opening(self.data.qpos[self._finger_q])
 
     def gripper_speed(self) -> float:
         """Rate of change of :meth:`gripper_opening` [1/s]."""
+        if self.robot.gripper is None:
+            return 0.0
         return self.robot.gripper.opening_rate(self.data.qvel[self._finger_v])
+
+    def lidar(self) -> LidarReading | None:
+        """A scan of the robot's lidar (its own geoms left out), or None without one."""
+        return None if self._lidar is None else self._lidar.scan(self.data)
 
     def joint_state(self) -> JointState:
         """Positions, velocities and actuator efforts of the arm and finger joints."""
