@@ -62,7 +62,7 @@ def run(repeats: int = 3) -> list[dict]:
         for script in scripts():
             best: dict | None = None
             for r in range(repeats):
-                out = Path(tmp) / f"{script.stem}_{r}.mcap"
+                out = Path(tmp) / f"{script.parent.name}_{script.stem}_{r}.mcap"
                 t0 = time.perf_counter()
                 s = record(
                     RecordConfig(scene=script.parent.name, script=script, seed=r, output=out)
