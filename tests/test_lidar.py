@@ -69,7 +69,7 @@ def test_ranges_match_the_rooms_geometry(room) -> None:
 def test_robot_geoms_are_never_hit(room) -> None:
     model, data = room
     ranges = Lidar(model, "lidar", ignore_group=3).scan(data).ranges
-    assert ranges.min() > 0.5  # the nearest wall, not the link 15 cm away
+    assert ranges.min() > 0.5  # the room's nearest side, not the link 15 cm away
     seen = Lidar(model, "lidar").scan(data).ranges  # without the mask: the link is hit
     assert np.sum(seen < 0.2) > 10
 
