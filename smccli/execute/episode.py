@@ -1,7 +1,8 @@
 """``smc replay``: one episode of an SMC tree in simulation (paper 3.6, 3.9, 5.1).
 
 An episode loads the tree and the scene it runs in (:func:`resolve`), builds the layout
-(:func:`layout_for`, :func:`read_layout`), runs Algorithm 2 through the robot's sensors
+(:func:`layout_for`, :func:`~smccli.world.scene.load_layout_file`), runs Algorithm 2
+through the robot's sensors
 (:class:`~smccli.execute.executor.TreeExecutor` over
 :class:`~smccli.execute.sensing.Sensors`), lets the scene settle at a leaf, and only then
 scores it from the simulator's truth (:func:`smccli.execute.evaluation.score`).
@@ -185,11 +186,6 @@ def layout_for(scene: Scene, seed: int, trial: int = 0) -> Layout:
     return sample_layout(scene, np.random.default_rng([seed, trial]))
 
 
-def read_layout(path: Path, scene: Scene) -> Layout:
-    """A layout file (schemas/layout.schema.json): object -> [x, y, z, yaw] or [x, y, yaw]."""
-    return load_layout_file(path, scene)
-
-
 # --- episodes -----------------------------------------------------------------------------
 
 
@@ -281,7 +277,7 @@ def run_episode(
     elif isinstance(layout, dict):
         lay = layout
     else:
-        lay = read_layout(Path(layout), sc)
+        lay = load_layout_file(Path(layout), sc)
     result = episode(t, sc, lay, seed=seed, output=output, force=force)
     result = replace(result, note=scene_note(t, sc))
     if report is not None:
