@@ -286,7 +286,7 @@ def _explain_alternatives(
     for e in err.context or ():
         failures.setdefault(int(e.relative_schema_path[0]), []).append(e)
     # Mappings told apart by a key (a teleop step: move_to, gripper, mark or wait).
-    keys = [_distinguishing_key(b) for b in branches]
+    keys = _distinguishing_keys(branches)
     if all(keys) and len(set(keys)) == len(keys):
         names = ", ".join(str(k) for k in keys)
         if not isinstance(inst, dict):
@@ -324,9 +324,18 @@ def _resolve(schema: Any, root: dict[str, Any]) -> dict[str, Any]:
     return schema if isinstance(schema, dict) else {}
 
 
-def _distinguishing_key(schema: dict[str, Any]) -> str | None:
-    required = schema.get("required") or []
-    return str(required[0]) if schema.get("type") == "object" and len(required) == 1 else None
+def _distinguishing_keys(branches: list[dict[str, Any]]) -> list[str | None]:
+    """Per mapping alternative, the first key it requires that no other alternative knows
+    (a scene's success condition: ``object`` or ``robot_at``); None where there is none."""
+    out: list[str | None] = []
+    for i, b in enumerate(branches):
+        others = set()
+        for j, o in enumerate(branches):
+            if j != i:
+                others |= set(o.get("properties") or {}) | set(o.get("required") or [])
+        own = [str(k) for k in b.get("required") or [] if k not in others]
+        out.append(own[0] if b.get("type") == "object" and own else None)
+    return out
 
 
 def _describe(schema: dict[str, Any]) -> str | None:

@@ -1,7 +1,12 @@
-"""The keyboard operator, driven for real: MuJoCo's viewer under Xvfb, keys sent by xdotool."""
+"""The keyboard operator, driven for real: MuJoCo's viewer under Xvfb, keys sent by xdotool.
+
+The mobile base's driving (speeds, body frame, release, lead clamp) is also checked without
+a viewer, through :class:`BaseDriver` on the simulator, tick by tick in simulated time.
+"""
 
 from __future__ import annotations
 
+import math
 import os
 import queue
 import re
@@ -10,14 +15,31 @@ import subprocess
 import sys
 import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from smccli.logs import read_log
+from smccli.record.keyboard import (
+    HOLD_S,
+    KEY_DOWN,
+    KEY_LEFT,
+    KEY_LEFT_SHIFT,
+    KEY_RIGHT,
+    KEY_UP,
+    MAX_LEAD_M,
+    BaseDriver,
+    held_from_presses,
+    twist,
+)
+from smccli.world.scene import load_scene
+from smccli.world.sensors import PoiCommand
+from smccli.world.sim import Sim
 
-pytestmark = pytest.mark.viewer
+BASE_SCENE = str(Path(__file__).parent / "scenes" / "rooms_drive" / "scene.yaml")
+KEY_Q, KEY_E = ord("Q"), ord("E")
 
 
 @pytest.fixture
@@ -133,7 +155,7 @@ class Stderr:
         return "".join(self.seen)
 
 
-def _record(tmp_path, display):
+def _record(tmp_path, display, scene: str = "pick_place"):
     out = tmp_path / "kb.mcap"
     env = {**os.environ, "DISPLAY": display, "MUJOCO_GL": "glfw"}
     proc = subprocess.Popen(
@@ -143,7 +165,7 @@ def _record(tmp_path, display):
             "smccli.cli",
             "record",
             "--scene",
-            "pick_place",
+            scene,
             "--operator",
             "keyboard",
             "-o",
@@ -157,27 +179,37 @@ def _record(tmp_path, display):
     return out, env, proc
 
 
-def _drive(tmp_path, display, *presses: tuple[str, ...]) -> tuple[int, str, Path]:
-    """Record with the keyboard operator, pressing each group of keys (at least 1.5 s of
-    simulation between groups, so the gripper can close); returns (exit code, stderr,
-    output path)."""
-    out, env, proc = _record(tmp_path, display)
+@contextmanager
+def _recording(tmp_path, display, scene: str = "pick_place"):
+    """A keyboard recording whose viewer is up and has the focus: (out, env, window, stderr)."""
+    out, env, proc = _record(tmp_path, display, scene)
     err = Stderr(proc)
     try:
         err.wait_for("keyboard operator ready")
         win = _window(env)
         _focus(env, win)
-        for group in presses[:-1]:
-            _keys(env, win, *group)
-            err.wait_sim(2.0)  # status lines come once per simulated second
-        _keys(env, win, *presses[-1])
-        proc.wait(timeout=60)
-        return proc.returncode, err.rest(), out
+        yield out, env, win, err
     finally:
         if proc.poll() is None:
             proc.kill()
 
 
+def _drive(
+    tmp_path, display, *presses: tuple[str, ...], scene: str = "pick_place"
+) -> tuple[int, str, Path]:
+    """Record with the keyboard operator, pressing each group of keys (at least 1.5 s of
+    simulation between groups, so the gripper can close); returns (exit code, stderr,
+    output path)."""
+    with _recording(tmp_path, display, scene) as (out, env, win, err):
+        for group in presses[:-1]:
+            _keys(env, win, *group)
+            err.wait_sim(2.0)  # status lines come once per simulated second
+        _keys(env, win, *presses[-1])
+        err.proc.wait(timeout=60)
+        return err.proc.returncode, err.rest(), out
+
+
+@pytest.mark.viewer
 def test_keys_move_the_target_toggle_the_gripper_and_mark(tmp_path, display):
     code, stderr, out = _drive(
         tmp_path, display, ("Up",) * 5 + ("Page_Down",) * 3 + ("q", "g"), ("m", "Return")
@@ -194,7 +226,152 @@ def test_keys_move_the_target_toggle_the_gripper_and_mark(tmp_path, display):
     assert {"/camera/color", "/camera/depth", "/robot/joint_states"} <= set(log.topic_counts)
 
 
-def test_discard_writes_nothing(tmp_path, display):
-    code, stderr, out = _drive(tmp_path, display, ("Up", "x"))
+@pytest.mark.viewer
+@pytest.mark.parametrize("scene", ["pick_place", BASE_SCENE], ids=["arm", "base"])
+def test_discard_writes_nothing(tmp_path, display, scene):
+    code, stderr, out = _drive(tmp_path, display, ("Up", "x"), scene=scene)
     assert code == 2 and "discarded" in stderr
     assert not out.exists() and not (tmp_path / "kb.mcap.part").exists()
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, end) of each run of True in ``mask``."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
+    return list(zip(edges[::2], edges[1::2], strict=True))
+
+
+@pytest.mark.viewer
+def test_base_drives_while_a_key_is_held(tmp_path, display):
+    """Real key holds (X key down ... key up): Up drives forward at 0.4 m/s while held and
+    stops on release, Shift+Up at 0.2 m/s; M marks, Enter keeps the log. Holds last 1-2 s
+    of simulated time (the recorder's status lines), whatever the machine's speed."""
+    with _recording(tmp_path, display, BASE_SCENE) as (out, env, win, err):
+        assert "hold keys to drive" in "".join(err.seen)
+        for hold in (["Up"], ["shift", "Up"]):
+            for k in hold:
+                subprocess.run(["xdotool", "keydown", k], env=env, check=True)
+            err.wait_sim(2.0)
+            for k in reversed(hold):
+                subprocess.run(["xdotool", "keyup", k], env=env, check=True)
+            err.wait_sim(2.0)  # at least 1 s at rest
+        _keys(env, win, "m", "Return")
+        err.proc.wait(timeout=60)
+        code, stderr = err.proc.returncode, err.rest()
+    assert code == 0, stderr
+    log = read_log(out)
+    t = np.array([c.t for c in log.commands])
+    target = np.array([c.target for c in log.commands])
+    speed = np.hypot(*np.diff(target[:, :2], axis=0).T) / np.diff(t)
+    moving = speed > 1e-6
+    fast, slow = np.isclose(speed, 0.4, atol=1e-6), np.isclose(speed, 0.2, atol=1e-6)
+    # Exactly two holds: one at the nominal speed, then one at half of it; in between and
+    # after, the target stands still (it stopped leading the moment the key came up).
+    assert _runs(moving) == _runs(fast) + _runs(slow), (_runs(fast), _runs(slow))
+    (f0, f1), (s0, s1) = _runs(fast)[0], _runs(slow)[0]
+    assert len(_runs(moving)) == 2 and f1 < s0
+    assert 0.8 <= t[f1] - t[f0] <= 3.0 and 0.8 <= t[s1] - t[s0] <= 3.0
+    # Forward is +x (the base starts facing +x); no sideways drift, no turn.
+    np.testing.assert_allclose(target[:, 1], 0.0, atol=1e-9)
+    np.testing.assert_allclose(target[:, 3], 0.0, atol=1e-9)
+    pt = np.asarray(log.poi_t)
+    poi = np.asarray(log.poi)
+    vx = np.diff(poi[:, 0]) / np.diff(pt)
+    at = lambda tt: int(np.searchsorted(pt, tt))  # noqa: E731
+    # The base follows: top speed while held ~ the commanded one.
+    assert 0.36 <= vx[at(t[f0]) : at(t[f1])].max() <= 0.41
+    assert 0.17 <= vx[at(t[s0]) : at(t[s1])].max() <= 0.21
+    # Released: a second later the base stands on its target.
+    for end in (f1, s1):
+        i = at(t[end] + 1.0)
+        assert abs(poi[i, 0] - target[end, 0]) < 0.003
+        assert abs(vx[i]) < 0.01
+    assert poi[-1, 0] == pytest.approx(0.4 * (t[f1] - t[f0]) + 0.2 * (t[s1] - t[s0]), abs=0.005)
+    assert [m.source for m in log.marks] == ["operator"]
+    assert {"/camera/color", "/lidar/scan", "/robot/joint_states"} <= set(log.topic_counts)
+
+
+# --- the base's driving, without a viewer --------------------------------------------------
+
+
+def test_twist_from_the_keys_held():
+    np.testing.assert_allclose(twist({KEY_UP}), [0.4, 0, 0])
+    np.testing.assert_allclose(twist({KEY_UP, KEY_DOWN}), [0, 0, 0])  # opposite keys cancel
+    np.testing.assert_allclose(twist({KEY_LEFT}), [0, 0.4, 0])
+    np.testing.assert_allclose(twist({KEY_RIGHT, KEY_E}), [0, -0.4, -0.8])
+    d = 0.4 / np.sqrt(2)  # a diagonal goes at the nominal speed
+    np.testing.assert_allclose(twist({KEY_UP, KEY_LEFT}), [d, d, 0])
+    np.testing.assert_allclose(twist({KEY_UP, KEY_Q, KEY_LEFT_SHIFT}), [0.2, 0, 0.4])
+    np.testing.assert_allclose(twist({KEY_LEFT_SHIFT, ord("M")}), [0, 0, 0])
+
+
+def test_without_key_state_a_press_drives_for_the_hold_window():
+    pressed = {KEY_UP: 1.0, KEY_Q: 1.2}
+    assert held_from_presses(pressed, 1.0 + HOLD_S - 0.01) == {KEY_UP, KEY_Q}
+    assert held_from_presses(pressed, 1.0 + HOLD_S + 0.01) == {KEY_Q}
+
+
+class Drive:
+    """The base in the rooms, driven by :class:`BaseDriver` one control tick at a time."""
+
+    def __init__(self) -> None:
+        self.sim = Sim(load_scene(BASE_SCENE))
+        self.driver = BaseDriver(self.sim.poi(), self.sim.control_period)
+        self.poi: list[np.ndarray] = []
+        self.target: list[np.ndarray] = []
+
+    def hold(self, keys: set[int], seconds: float) -> None:
+        for _ in range(round(seconds / self.sim.control_period)):
+            target = self.driver.update(keys, self.sim.poi())
+            self.sim.step(PoiCommand(self.sim.t, target, 1.0))
+            self.target.append(target)
+            self.poi.append(self.sim.poi())
+
+    def speed(self, seconds: float) -> float:
+        """Mean speed of the base over the last ``seconds`` [m/s]."""
+        n = round(seconds / self.sim.control_period)
+        return float(np.hypot(*(self.poi[-1][:2] - self.poi[-1 - n][:2])) / seconds)
+
+    def lead(self) -> float:
+        return float(np.hypot(*(self.target[-1][:2] - self.poi[-1][:2])))
+
+
+def test_base_drives_in_its_body_frame_stops_on_release_and_never_winds_up():
+    d = Drive()
+    # Forward 1.5 s: the target runs at 0.4 m/s along +x, the base follows ~9 cm behind.
+    d.hold({KEY_UP}, 1.5)
+    np.testing.assert_allclose(d.target[-1], [0.6, 0, 0, 0], atol=1e-9)
+    assert d.speed(0.5) == pytest.approx(0.4, abs=0.005)
+    assert 0.05 < d.lead() < MAX_LEAD_M
+    x_release = d.poi[-1][0]
+    # Released: the target stays put; the base coasts onto it and stops.
+    d.hold(set(), 1.0)
+    np.testing.assert_allclose(d.target[-1], [0.6, 0, 0, 0], atol=1e-9)
+    assert d.lead() < 0.002 and d.speed(0.1) < 0.01
+    assert 0.05 < d.poi[-1][0] - x_release < 0.1  # the coast: the servos' lag at 0.4 m/s
+    # Shift: half speed.
+    d.hold({KEY_UP, KEY_LEFT_SHIFT}, 1.5)
+    assert d.target[-1][0] == pytest.approx(0.9, abs=1e-9)
+    assert d.speed(0.5) == pytest.approx(0.2, abs=0.005)
+    d.hold(set(), 1.0)
+    # Turn left for 196 ticks at 0.8 rad/s: 89.8 degrees.
+    d.hold({KEY_Q}, 1.96)
+    d.hold(set(), 1.0)
+    assert math.degrees(d.poi[-1][3]) == pytest.approx(89.8, abs=0.1)
+    start = d.poi[-1].copy()
+    # Forward is now +y, in the body frame.
+    d.hold({KEY_UP}, 1.0)
+    d.hold(set(), 1.0)
+    np.testing.assert_allclose(d.poi[-1][:2] - start[:2], [0.0, 0.4], atol=0.003)
+    # Into the north wall (inner face y = 1.45; the base is 0.25 m from centre to front):
+    # the base stops at the wall and the target leads it by at most 0.3 m, not the 2 m
+    # that holding Up for 5 s would integrate.
+    d.hold({KEY_UP}, 5.0)
+    assert d.poi[-1][1] == pytest.approx(1.2, abs=0.005)
+    assert max(np.hypot(*(t[:2] - p[:2])) for t, p in zip(d.target, d.poi, strict=True)) <= (
+        MAX_LEAD_M + 1e-9
+    )
+    assert d.target[-1][1] == pytest.approx(1.5, abs=0.01)
+    # Released against the wall: the target drops back to the base, which stops pushing.
+    d.hold(set(), 0.3)
+    assert d.lead() < 0.005
+    assert d.poi[-1][1] == pytest.approx(1.2, abs=0.005)

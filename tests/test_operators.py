@@ -25,6 +25,7 @@ from smccli.world.sim import Sim
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = sorted((ROOT / "sample_logs").glob("*/*.yaml"))
+ARM_SAMPLES = [p for p in SAMPLES if p.parent.name != "rooms"]  # rooms: tests/test_rooms.py
 EXPECTED_MARKS = {
     "demo1": ["grasp", "release"],
     "demo2": ["grasp", "release"],
@@ -37,7 +38,7 @@ EXPECTED_MARKS = {
 def test_sample_scripts_are_schema_valid() -> None:
     schema = load_schema("teleop_script")
     jsonschema.Draft202012Validator.check_schema(schema)
-    assert len(SAMPLES) == 6
+    assert len(SAMPLES) == 8
     for path in SAMPLES:
         jsonschema.validate(yaml.safe_load(path.read_text()), schema)
         assert load_script(path).steps
@@ -48,7 +49,7 @@ def test_script_schema_describes_every_field_and_refuses_unknown_keys() -> None:
     assert fields_without_description(schema, schema) == []
 
 
-@pytest.mark.parametrize("path", SAMPLES, ids=lambda p: f"{p.parent.name}/{p.stem}")
+@pytest.mark.parametrize("path", ARM_SAMPLES, ids=lambda p: f"{p.parent.name}/{p.stem}")
 def test_sample_script_succeeds(path: Path) -> None:
     script = load_script(path)
     scene = load_scene(script.scene)
@@ -212,7 +213,7 @@ def test_scene_mismatch() -> None:
         ),
         (
             "  - {wait: 1, mark: a}\n",
-            "step 0 (line 3): expected exactly one of the keys move_to, gripper, mark, wait, "
+            "step 0 (line 3): expected exactly one of the keys move_to, go_to, gripper, mark, wait, "
             "found wait, mark",
         ),
         ("  - wait\n", "step 0 (line 3): expected a mapping with one of the keys move_to, "),
@@ -227,7 +228,7 @@ def test_step_errors_name_the_key_path(steps: str, expected: str) -> None:
 def test_top_level_errors_name_key_and_line() -> None:
     assert _err("scene: pick_place\nsped: 0.2\nsteps:\n  - wait: 1\n") == (
         "bad.yaml: sped (line 2): unknown key 'sped' (valid: scene, description, variant, speed, "
-        "yaw_speed, tremor, hesitation, speed_variation, steps)"
+        "yaw_speed, tremor, hesitation, speed_variation, steps, start)"
     )
     assert _err("scene: pick_place\nspeed: fast\nsteps:\n  - wait: 1\n") == (
         "bad.yaml: speed (line 2): expected a number, found 'fast'"

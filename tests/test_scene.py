@@ -20,6 +20,7 @@ from smccli.schemas import load_schema, parse_yaml, schema_problem, validate_yam
 from smccli.world.controller import reachable
 from smccli.world.scene import (
     RELATIONS,
+    ROBOT_KEY,
     SCENES_DIR,
     SHAPES,
     builtin_names,
@@ -31,7 +32,7 @@ from smccli.world.scene import (
     sample_layout,
 )
 
-SCENES = ["bench_pick", "bench_pick_panda", "pick_place", "weigh_sort"]
+SCENES = ["bench_pick", "bench_pick_panda", "pick_place", "rooms", "weigh_sort"]
 
 
 def test_builtin_scenes_load() -> None:
@@ -90,7 +91,13 @@ def test_sample_layout_in_ranges_without_overlap() -> None:
                 assert o.range_x[0] <= x <= o.range_x[1]
                 assert o.range_y[0] <= y <= o.range_y[1]
                 assert o.range_yaw[0] <= yaw <= o.range_yaw[1]
-            names = list(layout)
+            if scene.start is not None:  # a mobile base's start, within its ranges
+                x, y, _, yaw = layout[ROBOT_KEY]
+                st = scene.start
+                assert st.range_x[0] <= x <= st.range_x[1]
+                assert st.range_y[0] <= y <= st.range_y[1]
+                assert st.range_yaw[0] <= yaw <= st.range_yaw[1]
+            names = [n for n in layout if n != ROBOT_KEY]
             for i, a in enumerate(names):
                 for b in names[i + 1 :]:
                     d = math.dist(layout[a][:2], layout[b][:2])
@@ -99,7 +106,8 @@ def test_sample_layout_in_ranges_without_overlap() -> None:
         assert sample_layout(scene, np.random.default_rng(3)) == sample_layout(
             scene, np.random.default_rng(3)
         )
-        assert set(nominal_layout(scene)) == {o.name for o in scene.objects}
+        robot = {ROBOT_KEY} if scene.start is not None else set()
+        assert set(nominal_layout(scene)) == {o.name for o in scene.objects} | robot
         for variant, names in scene.variants:
             assert set(names) <= set(nominal_layout(scene, variant))
 
@@ -172,7 +180,7 @@ def test_schema_is_valid_and_describes_every_field(name: str) -> None:
 def test_scene_schema_enums_are_the_codes() -> None:
     defs = load_schema("scene")["$defs"]
     assert tuple(defs["object"]["properties"]["shape"]["enum"]) == SHAPES
-    assert tuple(defs["condition"]["properties"]["relation"]["enum"]) == RELATIONS
+    assert tuple(defs["object_condition"]["properties"]["relation"]["enum"]) == RELATIONS
 
 
 @pytest.mark.parametrize("name", SCENES)

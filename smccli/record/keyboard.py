@@ -1,10 +1,14 @@
-"""The keyboard operator: a person drives the POI target from MuJoCo's passive viewer.
+"""The keyboard operator: a person drives the robot from MuJoCo's passive viewer.
 
-Key presses arrive one per press on the viewer's thread; they are queued and applied in
-the simulation loop, which keeps real time. The viewer is closed explicitly at the end
-(a passive viewer left open can hang the process on exit).
+The robot file decides the mode. An arm moves its POI target one step per key press; a
+mobile base (``robot.base`` set, no arm) is driven by holding keys, like a game or a
+TidyBot / ManiSkill teleop. Key presses arrive on the viewer's thread; they are queued and
+applied in the simulation loop, which keeps real time. The viewer is closed explicitly at
+the end (a passive viewer left open can hang the process on exit).
 
-Keys (shown in the viewer's title and ``smc record --help``):
+Keys (the ready message lists them):
+
+Arm, one step per press:
 
 =============  ===========================================
 arrows         move the target in x (up/down) and y (left/right), 1 cm per press
@@ -15,6 +19,49 @@ M              saliency mark (the "this moment matters" button)
 Enter          finish: keep the log
 X              discard: delete the log
 =============  ===========================================
+
+Mobile base, hold to drive (body frame: forward is where the base faces):
+
+=============  ===========================================
+Up / Down      drive forward / back, 0.4 m/s
+Left / Right   strafe left / right, 0.4 m/s (with Up/Down: diagonal, same speed)
+Q / E          turn left / right (counter-clockwise / clockwise), 0.8 rad/s
+Shift          held with the above: half speed (0.2 m/s, 0.4 rad/s), for fine positioning
+M              saliency mark
+Enter          finish: keep the log
+X              discard: delete the log
+=============  ===========================================
+
+Holding a key. MuJoCo 4.0's passive viewer calls ``key_callback`` with the key code for a
+press only: its GLFW adapter drops GLFW's repeat and release events (measured under Xvfb:
+holding Up for 1.5 s gives one call). So the callback cannot tell a held key from a tap,
+and a "each press or repeat renews a short hold" scheme would stop after the first window.
+The base mode reads GLFW's own key state of the viewer's window instead (``glfwGetKey``,
+the same GLFW library the viewer runs on) every tick. The window is GLFW's current context
+on the viewer's thread, taken in the first key callback; it is read under the viewer's
+lock, which that thread holds while it polls events, so the window is alive and its key
+table is not being written. A key counts as down for a tick if GLFW says so or if it was
+pressed since the last tick (a tap shorter than a tick still moves one tick). GLFW releases
+every key when the window loses focus, so a key never sticks down. If the window cannot be
+had (another platform or MuJoCo version), each press drives for :data:`HOLD_S` instead.
+
+Driving. The keys down give a body-frame twist; each tick it is rotated by the measured
+heading and integrated into the world pose target ``[x, y, 0, yaw]`` sent as the POI command.
+The base's position servos follow with a lag that grows with speed (about 9 cm at 0.4 m/s,
+0.08 rad at 0.8 rad/s); on release the target stays put and the base settles onto it, which
+is how far it coasts. Shift halves the speeds rather than doubling them: the base saturates
+at 1 m/s and 1.5 rad/s (force caps against joint damping, ``robots/base/robot.xml``), so
+twice 0.8 rad/s could not be followed. The target may lead the measured pose by at most
+:data:`MAX_LEAD_M` and :data:`MAX_LEAD_RAD`, so a base held against a wall (its servos are
+force limited) does not wind up a target it would later run to; once nothing is held and
+the base has stalled short of its target (blocked), the target drops back to the measured
+pose, so it stops pushing. The viewer's camera tracks the base.
+
+The viewer's own shortcuts. MuJoCo's viewer takes every letter key for itself (render and
+visualisation toggles), even with its panels hidden, which is why the base drives with the
+arrows and not W/A/S/D: W toggles wireframe, S shadows, D hides static bodies (the walls).
+The visualisation flags toggled by letters this operator uses (Q, E, X, M) are put back
+every tick; G (the arm's gripper) also toggles the viewer's fog, a render flag out of reach.
 """
 
 from __future__ import annotations
@@ -23,21 +70,27 @@ import math
 import queue
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 
 import numpy as np
 
 from smccli.errors import SmcError
 from smccli.record.operators import OperatorOutput
+from smccli.world.controller import wrap
 from smccli.world.sensors import PoiCommand, SaliencyMark
 from smccli.world.sim import Sim
 
 # GLFW key codes (the viewer passes them to key_callback).
 KEY_RIGHT, KEY_LEFT, KEY_DOWN, KEY_UP = 262, 263, 264, 265
 KEY_PAGE_UP, KEY_PAGE_DOWN, KEY_ENTER = 266, 267, 257
+KEY_LEFT_SHIFT, KEY_RIGHT_SHIFT = 340, 344
 HELP = (
     "keyboard operator ready: arrows x/y, PgUp/PgDn z, Q/E yaw, G gripper, M mark, "
     "Enter finish, X discard"
+)
+BASE_HELP = (
+    "keyboard operator ready (mobile base, hold keys to drive): Up/Down forward/back, "
+    "Left/Right strafe, Q/E turn, Shift half speed, M mark, Enter finish, X discard"
 )
 STEP_M = 0.01
 STEP_YAW = math.radians(5)
@@ -55,6 +108,110 @@ BINDINGS = {
     KEY_ENTER: ("finish", None),
     ord("X"): ("discard", None),
 }
+EVENTS = {ord("M"): "mark", KEY_ENTER: "finish", ord("X"): "discard"}
+"""Keys the base mode acts on per press; the drive keys below act while held."""
+
+BASE_SPEED = 0.4
+"""Nominal translation speed of the base [m/s]."""
+BASE_TURN = 0.8
+"""Nominal turn rate of the base [rad/s]."""
+SLOW = 0.5
+"""Speed factor while Shift is held."""
+MAX_LEAD_M = 0.3
+"""How far the position target may lead the measured base position [m]."""
+MAX_LEAD_RAD = 0.5
+"""How far the yaw target may lead the measured heading [rad]."""
+STALL = (0.01, 0.02)
+"""Base speed [m/s] and turn rate [rad/s] under which a base with nothing held and its
+target further than :data:`STALL_LEAD` away counts as blocked."""
+STALL_LEAD = (0.02, 0.05)
+"""Lead [m], [rad] beyond which a base at rest counts as blocked (moving freely, its
+over-damped servos never rest that far from their target: speed ≈ 4.5/s × lead, turn rate
+≈ 10/s × lead)."""
+HOLD_S = 0.3
+"""Without GLFW's key state (see the module docstring): how long a press drives [s]."""
+DRIVE = {
+    # key: (forward, left, counter-clockwise) in units of the nominal speeds
+    KEY_UP: (1, 0, 0),
+    KEY_DOWN: (-1, 0, 0),
+    KEY_LEFT: (0, 1, 0),
+    KEY_RIGHT: (0, -1, 0),
+    ord("Q"): (0, 0, 1),
+    ord("E"): (0, 0, -1),
+}
+SHIFT = (KEY_LEFT_SHIFT, KEY_RIGHT_SHIFT)
+HELD = (*DRIVE, *SHIFT)
+"""Keys whose state (down or up) the base mode reads each tick."""
+
+
+def twist(held: Iterable[int]) -> np.ndarray:
+    """Body-frame twist ``[vx, vy, wz]`` [m/s, m/s, rad/s] for the keys held.
+
+    Opposite keys cancel; a diagonal goes at the nominal speed, not √2 times it.
+    """
+    held = set(held)
+    d = np.zeros(3)
+    for k in held & DRIVE.keys():
+        d += DRIVE[k]
+    xy = d[:2]
+    norm = float(np.hypot(*xy))
+    v = np.zeros(3)
+    if norm > 0:
+        v[:2] = xy / norm * BASE_SPEED
+    v[2] = np.sign(d[2]) * BASE_TURN
+    if held & set(SHIFT):
+        v *= SLOW
+    return v
+
+
+class BaseDriver:
+    """Integrates the body-frame twist of the keys held into a lead-clamped pose target.
+
+    Pure (no viewer, no simulator): :meth:`update` takes the keys held and the measured base
+    pose each control tick and returns the target ``[x, y, 0, yaw]`` to send.
+    """
+
+    def __init__(self, pose: np.ndarray, dt: float) -> None:
+        self.target = np.array([pose[0], pose[1], 0.0, pose[3]], dtype=float)
+        """World pose target ``[x, y, 0, yaw]``; yaw continuous (never wrapped)."""
+        self.dt = dt
+        self._last: np.ndarray | None = None
+
+    def update(self, held: Iterable[int], pose: np.ndarray) -> np.ndarray:
+        """Advance the target one tick with the keys ``held``; ``pose`` is the measured
+        ``[x, y, z, yaw]``."""
+        v = twist(held)
+        xy, yaw = np.array(pose[:2], dtype=float), float(pose[3])
+        c, s = math.cos(yaw), math.sin(yaw)
+        tgt = self.target
+        tgt[:2] += np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]]) * self.dt
+        tgt[3] += v[2] * self.dt
+        # Lead: how far the target is ahead of the base (yaw: the nearest turn).
+        lead = tgt[:2] - xy
+        dist = float(np.hypot(*lead))
+        lead_yaw = wrap(float(tgt[3]) - yaw)
+        if self._last is not None:
+            speed = float(np.hypot(*(xy - self._last[:2]))) / self.dt
+            rate = abs(wrap(yaw - float(self._last[2]))) / self.dt
+            # Nothing commanded, the base at rest short of its target: it is blocked. Let go.
+            if not v[:2].any() and speed < STALL[0] and dist > STALL_LEAD[0]:
+                lead[:] = 0.0
+                dist = 0.0
+            if v[2] == 0 and rate < STALL[1] and abs(lead_yaw) > STALL_LEAD[1]:
+                lead_yaw = 0.0
+        self._last = np.array([*xy, yaw])
+        if dist > MAX_LEAD_M:
+            lead *= MAX_LEAD_M / dist
+        tgt[:2] = xy + lead
+        # Shift the yaw target by the excess only, so it stays continuous.
+        kept = float(np.clip(lead_yaw, -MAX_LEAD_RAD, MAX_LEAD_RAD))
+        tgt[3] -= wrap(float(tgt[3]) - yaw) - kept
+        return tgt.copy()
+
+
+def held_from_presses(pressed_at: dict[int, float], t: float) -> set[int]:
+    """Without GLFW's key state: the keys pressed less than :data:`HOLD_S` before ``t``."""
+    return {k for k, t0 in pressed_at.items() if t - t0 < HOLD_S}
 
 
 class KeyboardOperator:
@@ -77,13 +234,18 @@ class KeyboardOperator:
         self._on_ready = on_ready
         self.discarded = False
         """True once the operator pressed X: the recording is thrown away."""
+        self.base = sim.robot.base is not None and not sim.robot.arm_joints
+        """True for a mobile base: hold keys to drive (else: an arm, a step per press)."""
+        self.driver = BaseDriver(self.target, sim.control_period) if self.base else None
+        self._window = None  # GLFW window of the viewer (first key callback)
+        self._pressed_at: dict[int, float] = {}
         self._t0_wall = time.perf_counter()
         self._t0_sim = sim.t
         try:
             self.viewer = mujoco.viewer.launch_passive(
                 sim.model,
                 sim.data,
-                key_callback=self.keys.put,
+                key_callback=self._on_key,
                 show_left_ui=False,
                 show_right_ui=False,
             )
@@ -96,17 +258,64 @@ class KeyboardOperator:
         # MuJoCo's viewer shows geom groups 0-2; the robot's own geoms sit in their group.
         with self.viewer.lock():
             self.viewer.opt.geomgroup[sim.robot.geom_group] = 1
+            # Visualisation flags the viewer toggles on letters this operator uses.
+            letters = {chr(k) for k in (*BINDINGS, *DRIVE) if 65 <= k <= 90}
+            self._flags = {
+                i: int(self.viewer.opt.flags[i])
+                for i, (_, _, key) in enumerate(mujoco.mjVISSTRING)
+                if key in letters
+            }
+            if self.base:
+                cam = self.viewer.cam
+                cam.type = mujoco.mjtCamera.mjCAMERA_TRACKING
+                cam.trackbodyid = int(sim.model.site_bodyid[sim.poi_id])
+                cam.distance, cam.elevation, cam.azimuth = 4.0, -40.0, 0.0
+
+    def _on_key(self, key: int) -> None:
+        """The viewer's key callback (its thread): queue the press; note the window."""
+        if self.base and self._window is None:
+            try:
+                import glfw
+
+                self._window = glfw.get_current_context()
+            except Exception:  # noqa: BLE001 - no key state: presses hold for HOLD_S
+                self._window = None
+        self.keys.put(key)
+
+    def _held(self, pressed: set[int]) -> set[int]:
+        """Base keys down this tick (see the module docstring)."""
+        t = self.sim.t
+        for k in pressed:
+            self._pressed_at[k] = t
+        if self._window is not None:
+            try:
+                import glfw
+
+                with self.viewer.lock():
+                    if self.viewer.is_running():
+                        return pressed | {
+                            k for k in HELD if glfw.get_key(self._window, k) == glfw.PRESS
+                        }
+            except Exception:  # noqa: BLE001 - fall back on presses
+                self._window = None
+        return pressed | held_from_presses(self._pressed_at, t)
 
     def tick(self) -> OperatorOutput:
         """Apply the presses queued since the last tick; keep real time; sync the viewer."""
         marks: list[SaliencyMark] = []
         done = discard = False
+        pressed: set[int] = set()
         while True:
             try:
                 key = self.keys.get_nowait()
             except queue.Empty:
                 break
-            kind, delta = BINDINGS.get(key, (None, None))
+            if self.base:
+                kind, delta = EVENTS.get(key), None
+                if key in HELD:
+                    pressed.add(key)
+            else:
+                kind, delta = BINDINGS.get(key, (None, None))
             if kind == "move" and delta is not None:
                 self.target = self.target + delta
             elif kind == "gripper":
@@ -117,16 +326,21 @@ class KeyboardOperator:
                 done = True
             elif kind == "discard":
                 done = discard = True
+        if self.driver is not None:
+            self.target = self.driver.update(self._held(pressed), self.sim.poi())
         if not self.viewer.is_running():
             done = True
         if self.realtime:
             ahead = (self.sim.t - self._t0_sim) - (time.perf_counter() - self._t0_wall)
             if ahead > 0:
                 time.sleep(ahead)
+        with self.viewer.lock():
+            for i, v in self._flags.items():
+                self.viewer.opt.flags[i] = v
         self.viewer.sync()
         if self._on_ready is not None:
             # The viewer has drawn and is reading keys: tell the person (and tests).
-            self._on_ready(HELP)
+            self._on_ready(BASE_HELP if self.base else HELP)
             self._on_ready = None
         cmd = PoiCommand(t=self.sim.t, target=self.target.copy(), gripper=self.gripper)
         self.discarded = self.discarded or discard

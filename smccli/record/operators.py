@@ -23,7 +23,7 @@ import numpy as np
 from smccli.errors import ScriptError
 from smccli.schemas import SchemaProblem, YamlDocument, check_yaml, key_path, parse_yaml
 from smccli.world.controller import reachable, wrap
-from smccli.world.scene import Layout, Scene, nominal_layout, sample_layout
+from smccli.world.scene import ROBOT_KEY, Layout, Scene, nominal_layout, sample_layout
 from smccli.world.sensors import PoiCommand, SaliencyMark
 from smccli.world.sim import Sim
 
@@ -61,6 +61,8 @@ class Step:
     """mark: the mark's label."""
     seconds: float = 0.0
     """wait: how long [s]."""
+    place: str | None = None
+    """move_to from a ``go_to`` step: the scene's named place [x, y, yaw] to drive to."""
 
     def where(self, source: str) -> str:
         return f"{source}: step {self.index} (line {self.line}, {self.kind})"
@@ -92,6 +94,9 @@ class Script:
     """What the demonstration shows."""
     variant: str | None = None
     """Scene variant (object subset) the demonstration is recorded in; None: the default."""
+    start: tuple[float, float, float] | None = None
+    """A mobile base's start pose ``(x, y, yaw)`` [m, m, rad]; None: the scene's (or a
+    random one with ``smc record --random-layout``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -134,6 +139,7 @@ def parse_script(text: str, source: str = "<text>") -> Script:
         speed_variation=float(raw.get("speed_variation", 0.0)),
         description=str(raw.get("description", "")),
         variant=None if raw.get("variant") is None else str(raw["variant"]),
+        start=None if raw.get("start") is None else tuple(float(v) for v in raw["start"]),  # type: ignore[arg-type]
     )
 
 
@@ -170,6 +176,10 @@ def _step(raw: dict[str, Any], index: int, line: int) -> Step:
             yaw=float(value["yaw"]) if "yaw" in value else (0.0 if "object" in value else None),
             duration=float(value["duration"]) if "duration" in value else None,
         )
+    if kind == "go_to":  # a mobile base to a named place: a move_to resolved at start
+        spec = {"place": value} if isinstance(value, str) else value
+        duration = float(spec["duration"]) if "duration" in spec else None
+        return Step("move_to", index, line, place=str(spec["place"]), duration=duration)
     if kind == "gripper":
         opening = {"open": 1.0, "close": 0.0}.get(value, value)
         return Step(kind, index, line, gripper=float(opening))
@@ -214,7 +224,13 @@ class ScriptOperator:
                 f"but the simulation runs {sim.scene.name!r}"
             )
         names = [o.name for o in sim.scene.objects if o.name in sim.present]
+        places = [n for n, _ in sim.scene.places]
         for step in script.steps:
+            if step.place is not None and step.place not in places:
+                raise ScriptError(
+                    f"{step.where(script.source)}: no place {step.place!r} in scene "
+                    f"{sim.scene.name} (places: {', '.join(places) or 'none'})"
+                )
             if step.object is not None and step.object not in names:
                 raise ScriptError(
                     f"{step.where(script.source)}: no object {step.object!r} in scene "
@@ -291,6 +307,9 @@ class ScriptOperator:
         return act
 
     def _goal(self, step: Step) -> np.ndarray:
+        if step.place is not None:
+            x, y, yaw = self.sim.scene.place(step.place)
+            return np.array([x, y, 0.0, yaw])
         if step.object is not None:
             x, y, z, oyaw = self.sim.object_pose(step.object)
             c, s = math.cos(oyaw), math.sin(oyaw)
@@ -350,6 +369,13 @@ def script_layout(scene: Scene, script: Script, rng: np.random.Generator | None 
     variant = script.variant
     if variant is None and scene.variants:
         variant = scene.variants[0][0]
-    if rng is None:
-        return nominal_layout(scene, variant)
-    return sample_layout(scene, rng, variant=variant)
+    layout = nominal_layout(scene, variant) if rng is None else sample_layout(scene, rng, variant=variant)
+    if script.start is not None:
+        if scene.robot.base is None:
+            raise ScriptError(
+                f"{script.source}: start: a start pose is for a mobile base; scene "
+                f"{scene.name}'s robot {scene.robot.name!r} has none"
+            )
+        x, y, yaw = script.start
+        layout[ROBOT_KEY] = (x, y, 0.0, yaw)
+    return layout

@@ -43,7 +43,10 @@ PYRAMID_STEPS = 3
 """A pyramid is approximated by this many stacked boxes (no meshes offline)."""
 
 Layout = dict[str, tuple[float, float, float, float]]
-"""Object name -> pose ``(x, y, z, yaw)`` [m, m, m, rad] of its bounding-box centre."""
+"""Object name -> pose ``(x, y, z, yaw)`` [m, m, m, rad] of its bounding-box centre; for a
+mobile base, the key :data:`ROBOT_KEY` holds its start pose ``(x, y, 0, yaw)``."""
+ROBOT_KEY = "robot"
+"""The layout key of a mobile base's start pose (no object may have this name)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,14 +85,30 @@ class ObjectSpec:
 
 @dataclass(frozen=True, slots=True)
 class Condition:
-    """``object`` rests ``relation`` (on top of / inside) ``target``."""
+    """``object`` rests ``relation`` (on top of / inside) ``target``; or, with relation
+    ``at``, the mobile base (object :data:`ROBOT_KEY`) stands at the place ``target``
+    within ``tolerance``."""
 
     object: str
-    """Name of the object that was moved."""
+    """Name of the object that was moved (:data:`ROBOT_KEY` for ``at``)."""
     relation: str
-    """One of :data:`RELATIONS`."""
+    """One of :data:`RELATIONS`, or ``at``."""
     target: str
-    """Name of the object it must rest on or in."""
+    """Name of the object it must rest on or in, or of the place (``at``)."""
+    tolerance: tuple[float, float] = (0.1, math.radians(10))
+    """``at``: largest position [m] and heading [rad] error."""
+
+
+@dataclass(frozen=True, slots=True)
+class StartSpec:
+    """Where a mobile base starts: a nominal pose and uniform ranges around nothing (absolute
+    intervals, as objects' ranges)."""
+
+    pose: tuple[float, float, float]
+    """Nominal ``(x, y, yaw)`` [m, m, rad]."""
+    range_x: tuple[float, float]
+    range_y: tuple[float, float]
+    range_yaw: tuple[float, float]
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,6 +121,9 @@ class SuccessCriterion:
     """At least one of these must hold."""
     none_of: tuple[Condition, ...] = ()
     """None of these may hold (e.g. the heavy object in the light bin)."""
+    variant: str | None = None
+    """The criterion only counts in layouts of this variant (the arrow the robot was
+    shown); None: in every layout."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -148,6 +170,30 @@ class Scene:
     """Named subsets of the optional objects, ``(name, object names)``. A layout holds the
     objects of one variant plus every object no variant names (tables, bins, scales);
     the others are parked out of sight. Empty: every object is always present."""
+    start: StartSpec | None = None
+    """A mobile base's start pose and its randomisation; None: the origin."""
+    places: tuple[tuple[str, tuple[float, float, float]], ...] = ()
+    """Named base poses ``(x, y, yaw)`` [m, m, rad]: goals of ``at`` conditions and of the
+    scripted operator's ``go_to`` steps."""
+    regions: tuple[tuple[str, tuple[tuple[float, float, float, float], ...]], ...] = ()
+    """Named areas of the floor (rooms), each a union of rectangles ``(x_min, x_max, y_min,
+    y_max)`` [m]; used to say in which room a base ended (evaluation, inspect)."""
+
+    def place(self, name: str) -> tuple[float, float, float]:
+        """The place called ``name``; SceneError listing the valid names otherwise."""
+        table = dict(self.places)
+        if name not in table:
+            raise SceneError(
+                f"scene {self.name}: no place {name!r} (places: {', '.join(table) or 'none'})"
+            )
+        return table[name]
+
+    def region_of(self, x: float, y: float) -> str | None:
+        """The region (room) holding the floor point (x, y) [m], None outside all."""
+        for name, rects in self.regions:
+            if any(x0 <= x <= x1 and y0 <= y <= y1 for x0, x1, y0, y1 in rects):
+                return name
+        return None
 
     def variant_objects(self, variant: str | None) -> tuple[str, ...]:
         """Objects present in ``variant`` (all objects when None or without variants)."""
@@ -318,7 +364,11 @@ def sensor_identity(scene: Scene, model: mujoco.MjModel | None = None) -> dict[s
 def nominal_layout(scene: Scene, variant: str | None = None) -> Layout:
     """The objects of ``variant`` (default: all) at their nominal poses."""
     present = scene.variant_objects(variant)
-    return {o.name: tuple(o.pose) for o in scene.objects if o.name in present}  # type: ignore[misc]
+    layout: Layout = {o.name: tuple(o.pose) for o in scene.objects if o.name in present}  # type: ignore[misc]
+    if scene.start is not None:
+        x, y, yaw = scene.start.pose
+        layout[ROBOT_KEY] = (x, y, 0.0, yaw)
+    return layout
 
 
 def sample_layout(
@@ -344,6 +394,13 @@ def sample_layout(
             lo, hi = o.range_yaw
             yaw = float(rng.uniform(lo, hi)) if lo < hi else lo
             layout[o.name] = (x, y, o.pose[2], yaw)
+        if scene.start is not None:
+            st = scene.start
+            x, y, yaw = (
+                float(rng.uniform(lo, hi)) if lo < hi else lo
+                for lo, hi in (st.range_x, st.range_y, st.range_yaw)
+            )
+            layout[ROBOT_KEY] = (x, y, 0.0, yaw)
         if not _overlaps(scene, layout, gap):
             return layout
     raise SceneError(
@@ -354,7 +411,8 @@ def sample_layout(
 def load_layout_file(path: str | Path, scene: Scene) -> Layout:
     """A layout of the user's (``smc replay --layout``): YAML or JSON, checked against
     ``schemas/layout.schema.json``, mapping object -> ``[x, y, z, yaw]`` [m, m, m, rad] or
-    ``[x, y, yaw]`` (z: the object's nominal height). Objects left out are absent."""
+    ``[x, y, yaw]`` (z: the object's nominal height). Objects left out are absent. A mobile
+    base's start is ``robot: [x, y, yaw]`` (default: the scene's nominal start)."""
     p = Path(path)
     try:
         text = p.read_text()
@@ -365,6 +423,15 @@ def load_layout_file(path: str | Path, scene: Scene) -> Layout:
     names = [o.name for o in scene.objects]
     layout: Layout = {}
     for name, values in doc.data.items():
+        if name == ROBOT_KEY and scene.robot.base is not None:
+            pose = _vec(values)
+            if len(pose) != 3:
+                raise SceneError(
+                    f"{p}: {doc.where((name,))}: expected the base's start [x, y, yaw], "
+                    f"found {len(pose)} numbers"
+                )
+            layout[ROBOT_KEY] = (pose[0], pose[1], 0.0, pose[2])
+            continue
         if name not in names:
             raise SceneError(
                 f"{p}: {doc.where((name,), of_key=True)}: no object {name!r} in scene "
@@ -375,6 +442,9 @@ def load_layout_file(path: str | Path, scene: Scene) -> Layout:
             pose = (pose[0], pose[1], scene.object(name).pose[2], pose[2])
         x, y, z, yaw = pose
         layout[name] = (x, y, z, yaw)
+    if ROBOT_KEY not in layout and scene.start is not None:
+        x, y, yaw = scene.start.pose
+        layout[ROBOT_KEY] = (x, y, 0.0, yaw)
     return layout
 
 
@@ -417,6 +487,11 @@ def _parse(
     objects: list[ObjectSpec] = []
     for i, o in enumerate(raw["objects"]):
         name, shape = str(o["name"]), str(o["shape"])
+        if name == ROBOT_KEY:
+            raise SceneError(
+                f"{_at(yaml_text, where, ('objects', i, 'name'))}: {ROBOT_KEY!r} is reserved "
+                "(a layout's key for the mobile base's start)"
+            )
         if name in (ob.name for ob in objects):
             raise SceneError(
                 f"{_at(yaml_text, where, ('objects', i, 'name'))}: duplicate object name {name!r}"
@@ -472,12 +547,32 @@ def _parse(
                 f"{_at(yaml_text, where, ('sensors', 'scale'))}: no object {scale!r} of shape "
                 f"scale (scales: {', '.join(scales) or 'none'})"
             )
+    places = dict(_places(raw))
+    variants = [str(v) for v in (raw.get("variants") or {})]
     success = []
     for task, crit in (raw.get("success") or {}).items():
         conds: dict[str, tuple[Condition, ...]] = {}
+        variant = crit.get("variant")
+        if variant is not None and variant not in variants:
+            raise SceneError(
+                f"{_at(yaml_text, where, ('success', task, 'variant'))}: no variant "
+                f"{variant!r} (variants: {', '.join(variants) or 'none'})"
+            )
         for key in ("any_of", "none_of"):
             items = []
             for j, c in enumerate(crit.get(key) or ()):
+                if "robot_at" in c:
+                    if c["robot_at"] not in places:
+                        raise SceneError(
+                            f"{_at(yaml_text, where, ('success', task, key, j, 'robot_at'))}: "
+                            f"no place {c['robot_at']!r} (places: {', '.join(places) or 'none'})"
+                        )
+                    tol = (
+                        float(c.get("position_tolerance", 0.1)),
+                        math.radians(float(c.get("yaw_tolerance_deg", 10.0))),
+                    )
+                    items.append(Condition(ROBOT_KEY, "at", str(c["robot_at"]), tol))
+                    continue
                 for role in ("object", "target"):
                     if c[role] not in names:
                         raise SceneError(
@@ -486,8 +581,55 @@ def _parse(
                         )
                 items.append(Condition(str(c["object"]), str(c["relation"]), str(c["target"])))
             conds[key] = tuple(items)
-        success.append(SuccessCriterion(str(task), conds["any_of"], conds["none_of"]))
+        success.append(
+            SuccessCriterion(str(task), conds["any_of"], conds["none_of"], variant=variant)
+        )
     return tuple(objects), camera, scale, tuple(success)
+
+
+def _places(raw: Mapping[str, Any]) -> tuple[tuple[str, tuple[float, float, float]], ...]:
+    return tuple(
+        (str(n), (float(p[0]), float(p[1]), float(p[2])))
+        for n, p in (raw.get("places") or {}).items()
+    )
+
+
+def _regions(
+    raw: Mapping[str, Any], where: str, yaml_text: str
+) -> tuple[tuple[str, tuple[tuple[float, float, float, float], ...]], ...]:
+    out = []
+    for name, rects in (raw.get("regions") or {}).items():
+        for j, (x0, x1, y0, y1) in enumerate(rects):
+            if x0 >= x1 or y0 >= y1:
+                raise SceneError(
+                    f"{_at(yaml_text, where, ('regions', name, j))}: expected "
+                    "[x_min, x_max, y_min, y_max] with min < max"
+                )
+        out.append((str(name), tuple(tuple(float(v) for v in r) for r in rects)))
+    return tuple(out)  # type: ignore[return-value]
+
+
+def _start(raw: Mapping[str, Any], where: str, yaml_text: str, robot: Robot) -> StartSpec | None:
+    st = raw.get("start")
+    if st is None:
+        return None
+    if robot.base is None:
+        raise SceneError(
+            f"{_at(yaml_text, where, ('start',))}: a start pose is for a mobile base; robot "
+            f"{robot.name!r} has none"
+        )
+    x, y, yaw = _vec(st["pose"])
+    rng = st.get("range") or {}
+    ranges = {}
+    for axis, nominal in (("x", x), ("y", y), ("yaw", yaw)):
+        lo, hi = _vec(rng.get(axis, (nominal, nominal)))
+        if lo > hi:
+            raise SceneError(
+                f"{_at(yaml_text, where, ('start', 'range', axis))}: expected [low, high], "
+                f"found low {lo:g} above high {hi:g}"
+            )
+        ranges[axis] = (lo, hi)
+    return StartSpec((x, y, yaw), ranges["x"], ranges["y"], ranges["yaw"])
 
 
 def _variants(
@@ -546,6 +688,9 @@ def _scene(
         success=success,
         description=str(raw.get("description", "")),
         variants=_variants(raw, objects, where, yaml_text),
+        start=_start(raw, where, yaml_text, robot),
+        places=_places(raw),
+        regions=_regions(raw, where, yaml_text),
     )
 
 

@@ -18,7 +18,7 @@ from smccli.world.controller import CartesianController, poi_pose, wrap
 from smccli.world.lidar import Lidar, LidarReading
 from smccli.world.robot import robot_geoms
 from smccli.world.robot_model import RobotModel
-from smccli.world.scene import Condition, Layout, ObjectSpec, Scene, nominal_layout
+from smccli.world.scene import ROBOT_KEY, Condition, Layout, ObjectSpec, Scene, nominal_layout
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
 
 CONTROL_PERIOD = 0.01
@@ -26,6 +26,8 @@ CONTROL_PERIOD = 0.01
 GRAVITY = 9.81
 PARK_X, PARK_Y0, PARK_DY = 2.5, -2.0, 0.4
 """Where objects absent from a layout rest: on the floor, behind the camera [m]."""
+HIDDEN_Z = -50.0
+"""Where fixed objects absent from a layout are moved [m]."""
 FLOOR_Z = -0.75
 """Height of the floor plane of the built-in scenes [m]."""
 
@@ -43,13 +45,49 @@ class Success:
         return self.ok
 
 
+def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a * b for planar poses (x, y, yaw): b given in a's frame -> in a's parent frame."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], a[2] + b[2]])
+
+
+def _between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a^-1 * b for planar poses: b in a's frame."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    return np.array([c * dx + s * dy, -s * dx + c * dy, wrap(float(b[2] - a[2]))])
+
+
+@dataclass(frozen=True, slots=True)
+class OdometryDrift:
+    """Wheel odometry's error, added on purpose (DESIGN.md 9: odometry = joint readings).
+
+    Each control period's body-frame motion is integrated with its translation scaled by
+    ``1 + scale`` and its heading off by ``yaw_per_metre`` per metre travelled, so the
+    error grows with the distance driven, as real odometry's does."""
+
+    scale: float = 0.02
+    """Relative error of the travelled distance."""
+    yaw_per_metre: float = 0.02
+    """Heading error per metre travelled [rad/m]."""
+
+
 class Sim:
-    """A scene in MuJoCo with the Cartesian controller between commands and joint servos."""
+    """A scene in MuJoCo with the Cartesian controller between commands and joint servos.
+
+    A mobile base's POI is its odometry: the joint readings, or with ``drift`` the motion
+    integrated with that error. Base targets are then in odometry's frame, as a real base
+    controller's are; :meth:`base_pose` (evaluation only) is the truth."""
 
     def __init__(
-        self, scene: Scene, layout: Layout | None = None, base_pose: np.ndarray | None = None
+        self,
+        scene: Scene,
+        layout: Layout | None = None,
+        base_pose: np.ndarray | None = None,
+        drift: OdometryDrift | None = None,
     ) -> None:
         self.scene = scene
+        self.drift = drift
         self.model = scene.model()
         self.data = mujoco.MjData(self.model)
         m = self.model
@@ -88,9 +126,11 @@ class Sim:
         self._grip_act = self._id(act, robot.gripper.actuator) if robot.gripper else -1
         assert len(fingers) == len(self._finger_q)
         self._lidar = None
+        self._lidar_site = -1
         for s in robot.sensors:
             if s.type == "lidar":
                 self._lidar = Lidar(m, s.target, ignore_group=robot.geom_group)
+                self._lidar_site = self._id(mujoco.mjtObj.mjOBJ_SITE, s.target)
         self._cam_id = self._id(mujoco.mjtObj.mjOBJ_CAMERA, scene.camera.name)
         self._body = {o.name: self._id(mujoco.mjtObj.mjOBJ_BODY, o.name) for o in scene.objects}
         self._free_qadr = {}
@@ -120,14 +160,19 @@ class Sim:
 
     def reset(self, layout: Layout | None = None, base_pose: np.ndarray | None = None) -> None:
         """Robot at home with the gripper open, objects at ``layout`` (default nominal), a
-        mobile base at ``base_pose`` ``[x, y, yaw]`` [m, m, rad] (default the origin)."""
-        base_pose = np.zeros(3) if base_pose is None else np.asarray(base_pose, dtype=float)
+        mobile base at ``base_pose`` ``[x, y, yaw]`` [m, m, rad] (default: the layout's
+        :data:`ROBOT_KEY`, else the origin)."""
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         if layout is None:
             # A scene with variants has look-alike objects sharing a nominal pose: show one.
             first = self.scene.variants[0][0] if self.scene.variants else None
             layout = nominal_layout(self.scene, first)
+        layout = dict(layout)
+        start = layout.pop(ROBOT_KEY, None)
+        if base_pose is None:
+            base_pose = np.zeros(3) if start is None else np.array([start[0], start[1], start[3]])
+        base_pose = np.asarray(base_pose, dtype=float)
         for name, (x, y, z, yaw) in layout.items():
             if name not in self._body:
                 valid = ", ".join(self._body)
@@ -139,6 +184,11 @@ class Sim:
             else:  # static: move the body itself (the scale, fixed bins)
                 m.body_pos[self._body[name]] = [x, y, z]
                 m.body_quat[self._body[name]] = quat
+        # Fixed objects the layout leaves out (the other variant's poster) go far below
+        # the floor, out of every sensor's reach.
+        for o in self.scene.objects:
+            if o.fixed and o.name not in layout:
+                m.body_pos[self._body[o.name]] = [PARK_X, PARK_Y0, HIDDEN_Z]
         # Objects the layout leaves out (another variant) rest on the floor behind the
         # camera, out of its view and out of the workspace.
         parked = [o for o in self.scene.objects if o.name not in layout and not o.fixed]
@@ -167,6 +217,10 @@ class Sim:
             d.qpos[self._base_q] = base_pose
             d.ctrl[self._base_act] = base_pose
         mujoco.mj_forward(m, d)
+        self._odom = base_pose.copy()
+        """Odometry's base pose (x, y, yaw) [m, m, rad], yaw unwrapped."""
+        self._odom_truth = base_pose.copy()
+        """The true pose at the last odometry update."""
         self._last = PoiCommand(0.0, self.poi(), 1.0)
         # Tare: the empty scale's reading is the platform's own weight.
         self._tare = 0.0 if self._scale_sensor is None else self._scale_force()
@@ -190,10 +244,29 @@ class Sim:
         if self.robot.gripper is not None:
             self.data.ctrl[self._grip_act] = self.robot.gripper.target(cmd.gripper)
         if len(self._base_act):
+            # The target is in odometry's frame: the same place relative to the robot in
+            # the joints' frame (identity without drift).
+            odom_to_true = _compose(self._odom_truth, _between(self._odom, np.zeros(3)))
+            x, y, yaw = _compose(odom_to_true, np.array([target[0], target[1], target[3]]))
             yaw_now = float(self.data.qpos[self._base_q[2]])
-            yaw = yaw_now + wrap(float(target[3]) - yaw_now)
-            self.data.ctrl[self._base_act] = [target[0], target[1], yaw]
+            yaw = yaw_now + wrap(float(yaw) - yaw_now)
+            self.data.ctrl[self._base_act] = [x, y, yaw]
         mujoco.mj_step(self.model, self.data, nstep=self.n_substeps)
+        if len(self._base_q):
+            self._integrate_odometry()
+
+    def _integrate_odometry(self) -> None:
+        """Add this period's body-frame motion to odometry, with the drift's error."""
+        now = self.data.qpos[self._base_q].astype(float)
+        if self.drift is None:
+            self._odom, self._odom_truth = now.copy(), now.copy()
+            return
+        delta = _between(self._odom_truth, now)
+        dist = math.hypot(delta[0], delta[1])
+        k = 1.0 + self.drift.scale
+        err = np.array([k * delta[0], k * delta[1], delta[2] + self.drift.yaw_per_metre * dist])
+        self._odom = _compose(self._odom, err)
+        self._odom_truth = now.copy()
 
     def settle(self, seconds: float) -> None:
         """Hold the last command for ``seconds`` [s] (lets objects come to rest)."""
@@ -203,8 +276,27 @@ class Sim:
     # --- robot sensors -----------------------------------------------------------------
 
     def poi(self) -> np.ndarray:
-        """POI ``[x, y, z, yaw]`` [m, m, m, rad], yaw in (−π, π]."""
+        """POI ``[x, y, z, yaw]`` [m, m, m, rad], yaw in (−π, π]; a mobile base's is its
+        odometry (z = 0)."""
+        if len(self._base_q) and self.drift is not None:
+            x, y, yaw = self._odom
+            return np.array([x, y, 0.0, wrap(float(yaw))])
         return poi_pose(self.data, self.poi_id)
+
+    def lidar_pose(self) -> np.ndarray | None:
+        """The lidar's planar pose ``[x, y, yaw]`` in odometry's frame (the POI composed
+        with the lidar's fixed mounting on the robot), None without a lidar."""
+        if self._lidar_site < 0:
+            return None
+        d = self.data
+        poi = poi_pose(d, self.poi_id)
+        R = d.site_xmat[self._lidar_site].reshape(3, 3)
+        site = np.array([*d.site_xpos[self._lidar_site][:2], math.atan2(R[1, 0], R[0, 0])])
+        mount = _between(np.array([poi[0], poi[1], poi[3]]), site)
+        p = self.poi()
+        out = _compose(np.array([p[0], p[1], p[3]]), mount)
+        out[2] = wrap(float(out[2]))
+        return out
 
     def gripper_opening(self) -> float:
         """Distance between the finger pads over its maximum, in [0, 1] (1 without one)."""
@@ -320,6 +412,29 @@ class Sim:
         d = self.data
         return {n: np.concatenate([d.xpos[b], d.xquat[b]]) for n, b in self._body.items()}
 
+    def base_pose(self) -> np.ndarray:
+        """The mobile base's true pose ``[x, y, yaw]`` (evaluation only; control reads
+        :meth:`poi`, odometry)."""
+        q = self.data.qpos[self._base_q]
+        return np.array([q[0], q[1], wrap(float(q[2]))])
+
+    def robot_contacts(self) -> list[str]:
+        """Names of what the robot's collision geoms touch now, floor excluded (evaluation
+        only: a mobile base's collisions)."""
+        m, d = self.model, self.data
+        mine = set(self._robot_geoms)
+        out = []
+        for i in range(d.ncon):
+            c = d.contact[i]
+            g1, g2 = int(c.geom1), int(c.geom2)
+            if (g1 in mine) == (g2 in mine):
+                continue
+            other = g2 if g1 in mine else g1
+            if m.geom_type[other] == mujoco.mjtGeom.mjGEOM_PLANE:
+                continue
+            out.append(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, other) or f"geom {other}")
+        return out
+
     def object_pose(self, name: str) -> np.ndarray:
         """Object ``[x, y, z, yaw]`` (for the simulated operator and evaluation)."""
         b = self._body[name]
@@ -334,7 +449,17 @@ class Sim:
         return float(np.linalg.norm(self.data.qvel[va : va + 3]))
 
     def holds(self, cond: Condition) -> tuple[bool, str]:
-        """Whether ``cond`` holds now: the object rests on top of / inside the target."""
+        """Whether ``cond`` holds now: the object rests on top of / inside the target, or
+        the base stands at the place."""
+        if cond.relation == "at":
+            gx, gy, gyaw = self.scene.place(cond.target)
+            x, y, yaw = self.base_pose()
+            dist, dyaw = math.hypot(x - gx, y - gy), abs(wrap(float(yaw - gyaw)))
+            ok = dist <= cond.tolerance[0] and dyaw <= cond.tolerance[1]
+            return ok, (
+                f"base {'at' if ok else 'not at'} {cond.target} ({dist * 100:.1f} cm, "
+                f"{math.degrees(dyaw):.1f} deg off)"
+            )
         obj, tgt = self.scene.object(cond.object), self.scene.object(cond.target)
         po, pt = self.object_pose(obj.name), self.object_pose(tgt.name)
         # Object centre in the target's yawed frame.
@@ -370,6 +495,10 @@ class Sim:
     def success(self, task: str | None = None) -> Success:
         """The scene's success criterion for ``task`` (default: any task succeeds)."""
         crits = [c for c in self.scene.success if task is None or c.task == task]
+        if task is None:  # only the criteria of the variant on show
+            crits = [c for c in crits if c.variant is None or self._shows(c.variant)]
+            if not crits:
+                return Success(False, "no task's criterion applies to this layout")
         if not crits:
             valid = ", ".join(c.task for c in self.scene.success)
             raise SceneError(f"scene {self.scene.name}: no task {task!r} (tasks: {valid})")
@@ -385,6 +514,11 @@ class Sim:
                 return Success(True, f"{crit.task}: {hit[0]}")
             reasons.append(f"{crit.task}: " + "; ".join(w for _, w in held))
         return Success(False, " | ".join(reasons))
+
+
+    def _shows(self, variant: str) -> bool:
+        """Whether the layout shows every object of ``variant``."""
+        return set(dict(self.scene.variants)[variant]) <= set(self.present)
 
 
 def _half_height(obj: ObjectSpec) -> float:
