@@ -23,6 +23,13 @@ def describe_perception(smc: Smc, params: PerceptionParams | None = None) -> str
         )
     if smc.perception.weight is not None:
         parts.append(f"weight {1000 * smc.perception.weight:.0f} g")
+    p = params or PerceptionParams()
+    if smc.perception.room is not None:
+        rgb = dominant_rgb(smc.perception.room, p.hue_bins, p.sat_bins, p.val_bins)
+        parts.append(f"room mostly {colour_name(rgb)}")
+    if smc.perception.scan is not None and smc.perception.scan_pose is not None:
+        x, y, _ = smc.perception.scan_pose
+        parts.append(f"scan of {int(smc.perception.scan.valid().sum())} returns at ({x:.2f}, {y:.2f})")
     return ", ".join(parts) or "nothing localized"
 
 
@@ -30,7 +37,7 @@ def describe_action(smc: Smc) -> str:
     """One-line summary of an SMC's action."""
     a = smc.action
     g = a.goal
-    where = "rel. object" if a.goal_frame == "object" else "world"
+    where = {"object": "rel. object", "scan": "rel. scan"}.get(a.goal_frame, "world")
     return (
         f"{a.event} | goal ({g[0]:+.3f}, {g[1]:+.3f}, {g[2]:+.3f}) m {where}, "
         f"{a.dmp.duration:.1f} s"

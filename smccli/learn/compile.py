@@ -21,12 +21,23 @@ from smccli import __version__
 from smccli.errors import LogError, TreeError
 from smccli.learn.params import SmcParams, params_to_dict, with_overrides
 from smccli.learn.segmentation import Fragment, SegmentMode, segment, trace_from_commands
-from smccli.learn.smc import Action, SalientPerceptions, Smc, Source, action_from_path
+from smccli.learn.smc import (
+    Action,
+    SalientPerceptions,
+    Smc,
+    Source,
+    action_from_path,
+    action_in_scan_frame,
+)
 from smccli.learn.tree import FORMAT, Tree, insert_chain, load_tree, save_tree
 from smccli.logs import Log, read_log
 from smccli.logs.robot import geometry_at, robot_model_of
 from smccli.outputs import check_output
 from smccli.perception import Cluster, clusters_from_frame, salient_cluster, scale_reading
+from smccli.perception.room import room_histogram
+from smccli.perception.scan import Scan2D, pose_compose
+from smccli.world.lidar import RANGE_MAX as LIDAR_RANGE_MAX
+from smccli.world.lidar import lidar_mount
 from smccli.world.robot import Robot
 from smccli.world.scene import Scene, robot_identity, scene_of_log, sensor_identity
 from smccli.world.sensors import CameraFrame
@@ -40,8 +51,10 @@ REQUIRED_TOPICS = {
     "/camera/depth",
     "/camera/calibration",
 }
+#: Topics every mobile-base log must hold for compile.
+BASE_TOPICS = {"/teleop/command", "/robot/poi", "/robot/joint_states", "/camera/color", "/lidar/scan"}
 #: Topics compile reads; the ground truth is deliberately not among them.
-READ_TOPICS = REQUIRED_TOPICS | {"/tf", "/scale/weight", "/saliency"}
+READ_TOPICS = REQUIRED_TOPICS | BASE_TOPICS | {"/tf", "/scale/weight", "/saliency"}
 
 
 @dataclass(frozen=True, slots=True)
@@ -146,6 +159,14 @@ def extract_chain(
             f"fragment(s) up to t={frags[-1].t1:.1f} s, dropped the last "
             f"{t_end - frags[-1].t1:.1f} s"
         )
+    if scene.robot.base is not None:
+        return Chain(
+            log=log.path,
+            sha256=log.sha256,
+            fragments=tuple(frags),
+            smcs=tuple(_base_smcs(log, frags, scene, params, warnings)),
+            warnings=tuple(warnings),
+        )
     robot = robot_model_of(log)
     has_scale = len(log.weight) > 0
     smcs: list[Smc] = []
@@ -184,6 +205,58 @@ def extract_chain(
     )
 
 
+def _base_smcs(
+    log: Log, frags: Sequence[Fragment], scene: Scene, params: SmcParams, warnings: list[str]
+) -> list[Smc]:
+    """The SMCs of a mobile base's fragments (paper 4.2): at each decision point the room's
+    colours (SI, eq. 17) and the lidar scan with the lidar's odometry pose (SL, salient by
+    eq. 18); the commanded base path as a DMP, its goal in the salient scan's frame."""
+    name = log.path.name
+    lidar = next((m for m in scene.robot.sensors if m.type == "lidar"), None)
+    if lidar is None:
+        raise LogError(f"{log.path}: robot {scene.robot.name!r} has no lidar; compile needs one")
+    mount = lidar_mount(scene.model(), scene.robot.poi, lidar.target)
+    scans_t = np.array([sc.t for sc in log.scans])
+    smcs: list[Smc] = []
+    for k, frag in enumerate(frags):
+        frame = _frame_at(log.frames, frag.t0)
+        if frame is None:
+            raise LogError(f"{name}: no camera frame near t={frag.t0:.2f} s")
+        room = room_histogram(frame.rgb, params.perception)
+        i = int(np.searchsorted(scans_t, frag.t0 - 1e-6))
+        if i >= len(scans_t) or scans_t[i] - frag.t0 > 0.2:
+            raise LogError(f"{name}: no lidar scan within 0.2 s after t={frag.t0:.2f} s")
+        msg = log.scans[i]
+        scan = Scan2D.from_span(msg.ranges, msg.start_angle, msg.end_angle, LIDAR_RANGE_MAX)
+        poi = log.poi[int(np.argmin(np.abs(log.poi_t - msg.t)))]
+        lidar_pose = pose_compose(np.array([poi[0], poi[1], poi[3]]), mount)
+        goal = log.poi[int(np.argmin(np.abs(log.poi_t - frag.t1)))]
+        salient = bool(np.hypot(goal[0] - lidar_pose[0], goal[1] - lidar_pose[1]) < params.scan_epsilon)
+        if not salient:
+            warnings.append(
+                f"{name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends farther than "
+                f"{params.scan_epsilon} m from where its scan was taken; its goal is stored "
+                "in odometry's frame"
+            )
+        cmds = [c for c in log.commands if frag.t0 - 1e-6 <= c.t <= frag.t1 + 1e-6]
+        if len(cmds) < 3:
+            raise LogError(
+                f"{name}: fragment {frag.t0:.2f}-{frag.t1:.2f} s holds fewer than 3 commands"
+            )
+        t = np.array([c.t for c in cmds]) - cmds[0].t
+        path = np.array([c.target for c in cmds], dtype=float)
+        action = action_in_scan_frame(t, path, lidar_pose if salient else None, params)
+        perception = SalientPerceptions(
+            cluster=None,
+            weight=None,
+            room=room,
+            scan=scan if salient else None,
+            scan_pose=lidar_pose if salient else None,
+        )
+        smcs.append(Smc(perception=perception, action=action))
+    return smcs
+
+
 def _action(
     log: Log, frag: Fragment, cluster: Cluster | None, held_symmetry: float, params: SmcParams
 ) -> Action:
@@ -202,7 +275,14 @@ def _action(
     return action_from_path(t, path, grip, cluster, params, held_symmetry=held_symmetry)
 
 
-def _required_topics(log: Log) -> set[str]:
+def _required_topics(log: Log, scene: Scene | None = None) -> set[str]:
+    if scene is None:  # doctor: the log's own scene, if it can be rebuilt
+        try:
+            scene = scene_of_log(log.attachments, log.path)
+        except LogError:
+            scene = None
+    if scene is not None and scene.robot.base is not None:
+        return set(BASE_TOPICS)
     needed = set(REQUIRED_TOPICS)
     if log.metadata.get("has_scale") == "true":
         needed.add("/scale/weight")
@@ -278,8 +358,9 @@ def compile_logs(
             if on_progress:
                 on_progress(path, "reading")
             log = read_log(path, topics=READ_TOPICS, on_warning=warn)
+            scene = scene_of_log(log.attachments, path)
             missing = sorted(
-                _required_topics(log) - {t for t, n in log.topic_counts.items() if n > 0}
+                _required_topics(log, scene) - {t for t, n in log.topic_counts.items() if n > 0}
             )
             if missing:
                 raise LogError(
@@ -289,12 +370,6 @@ def compile_logs(
             if log.sha256 in known or any(c.sha256 == log.sha256 for c in added):
                 skipped.append(path)
                 continue
-            scene = scene_of_log(log.attachments, path)
-            if not scene.robot.arm_joints:
-                raise LogError(
-                    f"{path}: robot {scene.robot.name!r} has no arm; compile learns from arm "
-                    "demonstrations only so far"
-                )
             model = scene.model()
             robot = robot_identity(scene, model)
             if tree.robot and tree.robot != robot:

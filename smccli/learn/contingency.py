@@ -1,12 +1,15 @@
 """Distances and contingency relations (paper 3.3-3.5, eq. 26, 29, 31, 36) and SMC merging.
 
 D_P sums per-sensor distances, each normalised so that 1 means "clearly different":
-clusters by :func:`smccli.perception.d_cluster`, the scale by |dw| / ``weight_scale``.
+clusters by :func:`smccli.perception.d_cluster`, the scale by |dw| / ``weight_scale``, a
+room's colours by :func:`smccli.perception.room.d_room`, a lidar scan by the trimmed
+chamfer distance once aligned by ICP (:mod:`smccli.perception.scan`).
 Perception sets of different kinds (a cluster on one side only) are never contingent.
 
 D_A is physical, in metres: the distance between the two goals in the salient object's
-frame (position, plus ``yaw_scale`` metres per radian of yaw) plus the RMS distance of the
-two approaches (the paths' last ``approach_length`` metres, relative to the goal), both
+frame (position, plus ``yaw_scale`` metres per radian of yaw; for a base, in the frame of
+the salient scan, the other scan's goal carried over by the ICP transform between the two
+scans) plus the RMS distance of the two approaches (the paths' last ``approach_length`` metres, relative to the goal), both
 taken at the object's symmetric equivalent that fits best. The paper's T_hA = 0.02 then
 reads "the same goal relative to the object, reached the same way, within 2 cm", whatever
 the layout the demonstrations started from (docs/choices.md). Actions with different
@@ -35,15 +38,43 @@ from smccli.learn.smc import (
     wrap_angle,
 )
 from smccli.perception import Cluster, d_cluster
+from smccli.perception.room import d_room
+from smccli.perception.scan import align_scans, chamfer, pose_compose, se2_to_pose
 
 INF = math.inf
 
 
-def d_p(a: SalientPerceptions, b: SalientPerceptions, params: SmcParams) -> float:
-    """Inter-perception distance D_P between two salient sets (eq. 26)."""
+def scan_transform(a: SalientPerceptions, b: SalientPerceptions, params: SmcParams) -> np.ndarray | None:
+    """Where ``b``'s lidar sat in ``a``'s lidar frame, by ICP of their scans: SE(2) (3, 3);
+    None unless both hold a scan."""
+    if a.scan is None or b.scan is None:
+        return None
+    try:
+        return align_scans(a.scan, b.scan, params.scan).T_target_source
+    except ValueError:  # too few returns to align: no common frame
+        return None
+
+
+def d_p(
+    a: SalientPerceptions,
+    b: SalientPerceptions,
+    params: SmcParams,
+    T_ab: np.ndarray | None = None,
+) -> float:
+    """Inter-perception distance D_P between two salient sets (eq. 26). ``T_ab``: the scans'
+    alignment (:func:`scan_transform`) when the caller has it."""
     total = 0.0
     if (a.cluster is None) != (b.cluster is None):
         return INF
+    if (a.room is None) != (b.room is None) or (a.scan is None) != (b.scan is None):
+        return INF
+    if a.room is not None and b.room is not None:
+        total += d_room(a.room, b.room, params.perception)
+    if a.scan is not None and b.scan is not None:
+        T_ab = scan_transform(a, b, params) if T_ab is None else T_ab
+        if T_ab is None:
+            return INF
+        total += chamfer(a.scan, b.scan, T_ab, params.scan) / params.scan.distance_scale
     if a.cluster is not None and b.cluster is not None:
         total += d_cluster(a.cluster, b.cluster, params.perception)
     if (a.weight is None) != (b.weight is None):
@@ -95,23 +126,58 @@ def align(a: Action, b: Action, params: SmcParams) -> Alignment:
     return best
 
 
-def d_a(a: Action, b: Action, params: SmcParams) -> float:
+def goal_in_a(b: Action, T_ab: np.ndarray) -> np.ndarray:
+    """``b``'s scan-frame goal [dx, dy, 0, dyaw] carried into ``a``'s scan frame by
+    ``T_ab`` (b's lidar in a's lidar frame)."""
+    x, y, yaw = pose_compose(se2_to_pose(T_ab), b.goal[[0, 1, 3]])
+    return np.array([x, y, 0.0, yaw])
+
+
+def d_a(a: Action, b: Action, params: SmcParams, T_ab: np.ndarray | None = None) -> float:
     """Inter-action distance D_A (eq. 29) [m]; inf for different gripper events or frames.
 
     The goal relative to the salient perception and the approach to it, compared over the
     object's symmetric equivalents (:func:`align`); where the action started and how it
     travelled there (which follow from the layout, not from the action) do not count.
+    Goals in scan frames are compared in ``a``'s, ``b``'s carried over by ``T_ab`` (the
+    scans' alignment, :func:`scan_transform`; inf without one).
     """
     if a.event != b.event or a.goal_frame != b.goal_frame:
         return INF
+    if a.goal_frame == "scan":
+        if T_ab is None:
+            return INF
+        return _pose_gap(a.goal, goal_in_a(b, T_ab), params)
     return align(a, b, params).total
+
+
+def _pose_gap(a: np.ndarray, b: np.ndarray, params: SmcParams) -> float:
+    """Distance of two goals [x, y, z, yaw] without symmetry: position + yaw_scale * |dyaw| [m]."""
+    return float(np.linalg.norm(a[:3] - b[:3])) + params.yaw_scale * abs(
+        wrap_angle(float(a[3] - b[3]))
+    )
+
+
+def goal_gap(a: Smc, b: Smc, params: SmcParams) -> float:
+    """How far apart two SMCs' goals are relative to their salient perceptions [m] (the goal
+    part of D_A, approaches left out); inf when they cannot be compared."""
+    pa, pb = a.action, b.action
+    if pa.event != pb.event or pa.goal_frame != pb.goal_frame:
+        return INF
+    if pa.goal_frame == "scan":
+        T_ab = scan_transform(a.perception, b.perception, params)
+        return INF if T_ab is None else _pose_gap(pa.goal, goal_in_a(pb, T_ab), params)
+    if pa.goal_frame == "world" and pa.symmetry >= TWO_PI - 1e-6 and pa.held_symmetry >= TWO_PI - 1e-6:
+        return _pose_gap(pa.goal, pb.goal, params)  # a base: no gripper's half turn
+    return align(pa, pb, params).goal
 
 
 def c_f(a: Smc, b: Smc, params: SmcParams) -> bool:
     """Fragment contingency C_F (eq. 31)."""
+    T_ab = scan_transform(a.perception, b.perception, params)
     return (
-        d_a(a.action, b.action, params) < params.t_ha
-        and d_p(a.perception, b.perception, params) < params.t_hp
+        d_a(a.action, b.action, params, T_ab) < params.t_ha
+        and d_p(a.perception, b.perception, params, T_ab) < params.t_hp
     )
 
 
@@ -181,9 +247,19 @@ def merge(
     weight = None
     if pa.weight is not None and pb.weight is not None:
         weight = (wa * pa.weight + wb * pb.weight) / (wa + wb)
+    room = None
+    if pa.room is not None and pb.room is not None:
+        room = (wa * pa.room + wb * pb.room) / (wa + wb)
+        room = room / max(float(room.sum()), 1e-12)
     aa, ab = a.action, b.action
-    theta = align(aa, ab, params or SmcParams()).rotation
-    goal_b = np.r_[rotate_z(ab.goal[:3], theta), ab.goal[3] + theta]
+    params = params or SmcParams()
+    if aa.goal_frame == "scan":
+        # b's goal in a's scan frame; a's scan stays the SMC's (a point cloud has no mean).
+        T_ab = scan_transform(pa, pb, params)
+        goal_b, theta = (ab.goal if T_ab is None else goal_in_a(ab, T_ab)), 0.0
+    else:
+        theta = align(aa, ab, params).rotation
+        goal_b = np.r_[rotate_z(ab.goal[:3], theta), ab.goal[3] + theta]
     symmetry = common_symmetry(aa.symmetry, ab.symmetry)
     yaw_period = TWO_PI if symmetry >= TWO_PI - 1e-6 else math.pi
     goal = (wa * aa.goal + wb * goal_b) / (wa + wb)
@@ -203,4 +279,7 @@ def merge(
         approach=approach.reshape(-1, 3),
         held_symmetry=max(aa.held_symmetry, ab.held_symmetry),
     )
-    return Smc(perception=SalientPerceptions(cluster=cluster, weight=weight), action=action)
+    perception = SalientPerceptions(
+        cluster=cluster, weight=weight, room=room, scan=pa.scan, scan_pose=pa.scan_pose
+    )
+    return Smc(perception=perception, action=action)

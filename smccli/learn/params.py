@@ -14,6 +14,7 @@ from typing import Any
 from smccli.errors import SmcError
 from smccli.learn.dmp import DmpParams
 from smccli.perception import PerceptionParams
+from smccli.perception.scan import ScanParams
 
 
 @dataclass(frozen=True, slots=True)
@@ -26,6 +27,10 @@ class SmcParams:
     """Perception contingency threshold T_hP (eq. 31, 36): D_P below it means the same context."""
     epsilon: float = 0.08
     """Saliency radius of object clusters (eq. 21) [m]: horizontal distance to the POI."""
+    scan_epsilon: float = 8.0
+    """Saliency radius of a lidar scan (eq. 18) [m]: the scan is salient when the fragment's
+    goal lies this close to where it was taken, i.e. within the lidar's range (8 m), where
+    the scan can place it."""
     weight_window: float = 0.15
     """The scale is read as the median over this window ending at the decision point [s]."""
     weight_scale: float = 0.05
@@ -46,6 +51,8 @@ class SmcParams:
     """Movement primitive settings (eq. 27-28)."""
     perception: PerceptionParams = field(default_factory=PerceptionParams)
     """Point cloud, clustering and histogram settings (section 3.3)."""
+    scan: ScanParams = field(default_factory=ScanParams)
+    """Scan alignment and distance settings (4.2)."""
 
 
 def params_to_dict(params: Any) -> dict[str, Any]:

@@ -4,8 +4,12 @@ An SMC is extracted from one fragment [t0, t1] of a demonstration:
 
 - salient perceptions (3.3) are read at t0, the decision point: the scale's weight (SI,
   always salient) and the object cluster (ML) nearest the POI at t1, if within epsilon;
+- a mobile base's perceptions (4.2) are the camera's whole-frame colour histogram (SI,
+  always salient, eq. 17) and the lidar scan with the lidar's odometry pose (SL, salient
+  when the fragment's goal lies within ``scan_epsilon`` of where it was taken, eq. 18);
 - the salient action (3.4) is the commanded POI path over [t0, t1] as a DMP, its goal
-  stored in the salient object's frame when there is one (else in the world), the
+  stored in the salient object's frame when there is one, else in the salient scan's
+  frame (the lidar's pose at the scan, eq. 38-39), else in the world; the
   approach (the path's last centimetres, relative to the goal, in the same frame), the
   symmetry of that frame, and the gripper command at both ends (a discrete event, not a
   DMP dimension).
@@ -28,6 +32,7 @@ from smccli.learn import dmp as dmp_mod
 from smccli.learn.dmp import Dmp
 from smccli.learn.params import SmcParams
 from smccli.perception import Cluster
+from smccli.perception.scan import Scan2D, goal_in_lidar, scan_from_dict, scan_to_dict
 
 TWO_PI = 2 * math.pi
 """The period of no symmetry [rad]."""
@@ -43,6 +48,14 @@ class SalientPerceptions:
     """ML: the object cluster nearest the POI at the fragment's end (eq. 21-22), if any."""
     weight: float | None
     """SI: the scale reading at the decision point [kg]; None when the scene has no scale."""
+    room: np.ndarray | None = None
+    """SI: the camera's whole-frame colour histogram (:func:`~smccli.perception.room.
+    room_histogram`), shape (histogram_size,); None for a robot without a base."""
+    scan: Scan2D | None = None
+    """SL value: the lidar scan at the decision point, when salient (eq. 18)."""
+    scan_pose: np.ndarray | None = None
+    """SL location: the lidar's pose ``[x, y, yaw]`` in odometry's frame when it took
+    ``scan`` [m, m, rad]."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,10 +65,11 @@ class Action:
     dmp: Dmp
     """Commanded POI path [x, y, z, yaw] over the fragment, as a DMP (eq. 28)."""
     goal_frame: str
-    """``"object"``: ``goal`` is in the salient cluster's frame; ``"world"``: absolute."""
+    """``"object"``: ``goal`` is in the salient cluster's frame; ``"scan"``: in the frame of
+    the lidar when it took the salient scan; ``"world"``: absolute."""
     goal: np.ndarray
-    """POI goal x_f, shape (4,): [dx, dy, dz, dyaw] in the object's yawed frame [m, rad],
-    or [x, y, z, yaw] in the world [m, rad]."""
+    """POI goal x_f, shape (4,): [dx, dy, dz, dyaw] in the object's yawed frame or the
+    lidar's frame [m, rad], or [x, y, z, yaw] in the world [m, rad]."""
     gripper_start: float
     """Gripper command at the fragment's start, in [0, 1] (1 = open)."""
     gripper_end: float
@@ -220,6 +234,38 @@ def action_from_path(
     )
 
 
+def action_in_scan_frame(
+    t: np.ndarray, path: np.ndarray, lidar_pose: np.ndarray | None, params: SmcParams
+) -> Action:
+    """Action saliency (3.4) of a mobile base's fragment: the commanded base path ``path``
+    (T, 4) ``[x, y, 0, yaw]`` [m, rad] at times ``t`` (T,) [s] as a DMP, its goal relative to
+    the lidar's pose ``lidar_pose`` ``[x, y, yaw]`` at the salient scan (G_rel = L^-1 G,
+    eq. 38-39), or in the world when no scan is salient (None).
+
+    No approach is stored: the last centimetres of a base's path point back to where it
+    started, which follows from the layout, not from the action (a holonomic base's
+    heading is in the goal)."""
+    path = np.array(path, dtype=float)
+    path[:, 3] = np.unwrap(path[:, 3])
+    dmp = dmp_mod.fit(t, path, params.dmp)
+    gx, gy, _, gyaw = path[-1]
+    if lidar_pose is None:
+        goal, frame = np.array([gx, gy, 0.0, math.remainder(gyaw, TWO_PI)]), "world"
+    else:
+        dx, dy, dyaw = goal_in_lidar(np.array([gx, gy, gyaw]), np.asarray(lidar_pose))
+        goal, frame = np.array([dx, dy, 0.0, dyaw]), "scan"
+    return Action(
+        dmp=dmp,
+        goal_frame=frame,
+        goal=goal,
+        gripper_start=1.0,
+        gripper_end=1.0,
+        symmetry=TWO_PI,
+        approach=np.zeros((0, 3)),
+        held_symmetry=TWO_PI,
+    )
+
+
 def goal_from_object(
     goal_obj: np.ndarray, cluster: Cluster, near_yaw: float, *, flip: bool = True
 ) -> np.ndarray:
@@ -303,10 +349,14 @@ def smc_to_dict(smc: Smc) -> tuple[dict[str, Any], dict[str, Any]]:
     """(perception, action) JSON objects of an SMC, as stored on a tree edge."""
     p = smc.perception
     a = smc.action
-    perception = {
+    perception: dict[str, Any] = {
         "cluster": None if p.cluster is None else cluster_to_dict(p.cluster),
         "weight": p.weight,
     }
+    if p.room is not None:  # a mobile base's; arm trees keep their two keys
+        perception["room"] = _to_json(p.room)
+        perception["scan"] = None if p.scan is None else scan_to_dict(p.scan)
+        perception["scan_pose"] = None if p.scan_pose is None else _to_json(p.scan_pose)
     action = {
         "event": a.event,
         "goal_frame": a.goal_frame,
@@ -325,10 +375,14 @@ def smc_to_dict(smc: Smc) -> tuple[dict[str, Any], dict[str, Any]]:
 def smc_from_dict(perception: dict[str, Any], action: dict[str, Any]) -> Smc:
     """Inverse of :func:`smc_to_dict`."""
     cluster = perception.get("cluster")
+    room, scan, scan_pose = (perception.get(k) for k in ("room", "scan", "scan_pose"))
     return Smc(
         perception=SalientPerceptions(
             cluster=None if cluster is None else cluster_from_dict(cluster),
             weight=perception.get("weight"),
+            room=None if room is None else np.asarray(room, dtype=float),
+            scan=None if scan is None else scan_from_dict(scan),
+            scan_pose=None if scan_pose is None else np.asarray(scan_pose, dtype=float),
         ),
         action=Action(
             dmp=dmp_mod.from_dict(action["dmp"]),

@@ -21,6 +21,10 @@ N_GROUPS = 6
 """MuJoCo's geom groups, 0-5."""
 
 
+RANGE_MAX = 8.0
+"""The lidar's range [m]: beams see no further."""
+
+
 @dataclass(frozen=True, slots=True)
 class LidarReading:
     """One scan: ranges in the site's frame, in beam order."""
@@ -49,7 +53,7 @@ class Lidar:
         site: str,
         *,
         beams: int = 360,
-        range_max: float = 8.0,
+        range_max: float = RANGE_MAX,
         ignore_group: int | None = None,
     ) -> None:
         self.model = model
@@ -101,3 +105,22 @@ class Lidar:
             range_max=self.range_max,
             pose=np.array([origin[0], origin[1], yaw]),
         )
+
+
+def lidar_mount(model: mujoco.MjModel, poi_site: str, lidar_site: str) -> np.ndarray:
+    """Where the lidar sits on the robot: its planar pose ``[x, y, yaw]`` in the POI's frame
+    [m, m, rad], from the model at its reference configuration (both sites ride the base)."""
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    poses = []
+    for name in (poi_site, lidar_site):
+        i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
+        if i < 0:
+            raise SceneError(f"model has no site {name!r}")
+        R = data.site_xmat[i].reshape(3, 3)
+        poses.append((data.site_xpos[i][:2].copy(), math.atan2(R[1, 0], R[0, 0])))
+    (p0, y0), (p1, y1) = poses
+    c, s = math.cos(y0), math.sin(y0)
+    d = p1 - p0
+    yaw = math.atan2(math.sin(y1 - y0), math.cos(y1 - y0))
+    return np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], yaw])
