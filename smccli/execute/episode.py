@@ -38,7 +38,8 @@ from smccli.world.scene import (
     sample_layout,
     sensor_identity,
 )
-from smccli.world.sim import Sim
+from smccli.world.sensors import PoiCommand
+from smccli.world.sim import OdometryDrift, Sim
 
 FINAL_SETTLE = 1.0
 """Sim time the scene settles at a leaf before scoring [s]."""
@@ -203,16 +204,27 @@ def episode(
     output: Path | None = None,
     force: bool = False,
     evaluate: Callable[[Sim], None] | None = None,
+    drift: OdometryDrift | None = None,
 ) -> EpisodeResult:
     """Run Algorithm 2 once on ``layout`` and score it. ``evaluate`` runs first thing after
-    control (tests use it to re-enable object queries)."""
+    control (tests use it to re-enable object queries); ``drift``: a mobile base's odometry
+    error (:class:`~smccli.world.sim.OdometryDrift`)."""
     wall0 = time.perf_counter()
-    sim = Sim(scene, layout)
+    sim = Sim(scene, layout, drift=drift)
     log = None
+    touched: set[str] = set()
     try:
         if output is not None:
             log = ReplayLog(Path(output), scene, sim, tree, seed, layout, force)
-        sensors = Sensors(sim, on_step=None if log is None else log.on_step)
+
+        def on_step(cmd: PoiCommand) -> None:
+            # Evaluation's watch, beside control: what a mobile base touches (sim truth).
+            if scene.robot.base is not None:
+                touched.update(sim.robot_contacts())
+            if log is not None:
+                log.on_step(cmd)
+
+        sensors = Sensors(sim, on_step=on_step)
         sensors.render_camera()  # the camera is running before the task starts (GL warm-up)
         executor = TreeExecutor(tree, sensors, on_decision=None if log is None else log.on_decision)
         t0 = sim.t
@@ -233,7 +245,9 @@ def episode(
     # --- evaluation: control is over, the simulator may be read ---
     if evaluate is not None:
         evaluate(sim)
-    verdict = score(sim, scene, layout, outcome=outcome, reason=reason, actions=actions)
+    verdict = score(
+        sim, scene, layout, outcome=outcome, reason=reason, actions=actions, collisions=sorted(touched)
+    )
     return EpisodeResult(
         outcome=verdict.outcome,
         success=verdict.success,
@@ -260,6 +274,7 @@ def run_episode(
     output: Path | None = None,
     report: Path | None = None,
     force: bool = False,
+    drift: OdometryDrift | None = None,
 ) -> EpisodeResult:
     """``smc replay TREE``: one episode on the layout file or the seed's layout (trial 0).
 
@@ -278,7 +293,7 @@ def run_episode(
         lay = layout
     else:
         lay = load_layout_file(Path(layout), sc)
-    result = episode(t, sc, lay, seed=seed, output=output, force=force)
+    result = episode(t, sc, lay, seed=seed, output=output, force=force, drift=drift)
     result = replace(result, note=scene_note(t, sc))
     if report is not None:
         doc = {

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from smccli.execute.executor import CONTROL_OUTCOMES, ActionTrace
-from smccli.world.scene import Layout, Scene
+from smccli.world.scene import ROBOT_KEY, Layout, Scene
 from smccli.world.sim import Sim
 
 OUTCOMES = (
@@ -20,9 +20,13 @@ OUTCOMES = (
     "grasp_missed",
     "object_dropped",
     "placed_outside",
+    "collision",
+    "wrong_room",
+    "goal_missed",
 )
 """Episode outcomes: success, the three control stops, then the failure causes found at
-evaluation time from the trace and the final state."""
+evaluation time from the trace and the final state (an arm's: grasp_missed,
+object_dropped, placed_outside; a mobile base's: collision, wrong_room, goal_missed)."""
 
 EMPTY_GRIP = 0.08
 """A closed gripper whose opening is below this holds nothing [fraction of full opening]."""
@@ -52,18 +56,29 @@ def score(
     outcome: str,
     reason: str,
     actions: Sequence[ActionTrace],
+    collisions: Sequence[str] = (),
 ) -> Verdict:
     """Score an episode whose control ended with ``outcome`` (:data:`CONTROL_OUTCOMES`):
     read the final object poses and, when a leaf was reached, the scene's success criterion;
-    a leaf without success gets its failure cause (:func:`classify_failure`)."""
+    a leaf without success gets its failure cause (:func:`classify_failure`,
+    :func:`classify_base_failure`). ``collisions``: what a mobile base touched during the
+    episode (the floor aside); a base that touched anything failed, wherever it ended."""
     final = {o.name: [float(v) for v in sim.object_pose(o.name)] for o in scene.objects}
+    if scene.robot.base is not None:
+        x, y, yaw = sim.base_pose()
+        final[ROBOT_KEY] = [float(x), float(y), 0.0, float(yaw)]
     obj = manipulated_object(scene, layout, final)
     ok = False
     if outcome == "success":
         criterion = sim.success()
         ok = bool(criterion)
         reason = criterion.reason
-        if not ok:
+        if collisions:
+            ok, outcome = False, "collision"
+            reason = f"the base touched {', '.join(sorted(set(collisions)))}; {reason}"
+        elif not ok and scene.robot.base is not None:
+            outcome = classify_base_failure(scene, sim, final[ROBOT_KEY])
+        elif not ok:
             outcome = classify_failure(scene, layout, final, actions, obj)
     return Verdict(outcome=outcome, success=ok, reason=reason, manipulated=obj, final_poses=final)
 
@@ -80,6 +95,22 @@ def manipulated_object(scene: Scene, layout: Layout, final: dict[str, list[float
     ]
     best = max(moved)
     return best[2] if best[0] > 0.02 else names[0]
+
+
+def classify_base_failure(scene: Scene, sim: Sim, final: Sequence[float]) -> str:
+    """Why a mobile base that reached a leaf missed its goal: ``wrong_room`` when it ended
+    in another region (room) than the goal place of the task on show, else ``goal_missed``."""
+    goals = [
+        scene.place(c.target)
+        for crit in scene.success
+        if crit.variant is None or sim.shows(crit.variant)
+        for c in crit.any_of
+        if c.relation == "at"
+    ]
+    here = scene.region_of(final[0], final[1])
+    if goals and all(scene.region_of(g[0], g[1]) != here for g in goals):
+        return "wrong_room"
+    return "goal_missed"
 
 
 def classify_failure(

@@ -32,13 +32,15 @@ from typing import Any
 import numpy as np
 
 from smccli.execute.sensing import Sensors
-from smccli.learn.contingency import align
 from smccli.learn.contingency import d_p as d_p_stored
+from smccli.learn.contingency import goal_gap
 from smccli.learn.dmp import rollout
 from smccli.learn.params import SmcParams
 from smccli.learn.smc import TWO_PI, Action, goal_from_object
 from smccli.learn.tree import ROOT, Edge, Tree
 from smccli.perception import Cluster, clusters_from_frame, scale_reading
+from smccli.perception.room import d_room, room_histogram
+from smccli.perception.scan import align_scans, chamfer, map_goal
 from smccli.world.controller import reachable, wrap
 from smccli.world.sensors import CameraFrame, PoiCommand
 
@@ -162,6 +164,9 @@ class Candidate:
     """C_Now: d_p < T_hP (eq. 36)."""
     cluster_index: int | None
     """Context cluster matched to the SMC's localized perception (eq. 39), if any."""
+    terms: tuple[tuple[str, float], ...] = ()
+    """A mobile base's D_P by sensor (``room``, ``scan``), and the ICP fitness of the scan's
+    alignment (``icp_fitness``, not part of D_P)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -188,6 +193,10 @@ class Decision:
     """Wall time to match the candidates [s]."""
     duration: float = 0.0
     """Rollout duration of the chosen action [s]."""
+    icp_s: float = 0.0
+    """Wall time of the scan alignments, part of ``match_s`` [s]."""
+    lidar_pose: np.ndarray | None = None
+    """A mobile base's lidar pose in odometry's frame at the decision ``[x, y, yaw]``."""
 
     @property
     def latency_s(self) -> float:
@@ -206,6 +215,7 @@ class Decision:
                     "d_p": _num(c.d_p),
                     "contingent": c.contingent,
                     "cluster": c.cluster_index,
+                    **({"terms": {k: _num(v) for k, v in c.terms}} if c.terms else {}),
                 }
                 for c in self.candidates
             ],
@@ -219,8 +229,14 @@ class Decision:
             "timings": {
                 "perceive": self.perceive_s,
                 "match": self.match_s,
+                "icp": self.icp_s,
                 "total": self.latency_s,
             },
+            **(
+                {"lidar_pose": [float(v) for v in self.lidar_pose]}
+                if self.lidar_pose is not None
+                else {}
+            ),
         }
 
 
@@ -250,11 +266,8 @@ def _num(x: float) -> float | None:
 def equivalent(a: Edge, b: Edge, params: SmcParams) -> bool:
     """Two sibling SMCs that differ at most by their path: same salient perceptions
     (D_P < T_hP), gripper event and goal frame, goals within T_hA once the object's
-    symmetry is taken out (:func:`smccli.learn.contingency.align`)."""
-    pa, pb = a.smc.action, b.smc.action
-    if pa.event != pb.event or pa.goal_frame != pb.goal_frame:
-        return False
-    if align(pa, pb, params).goal >= params.t_ha:
+    symmetry is taken out (:func:`smccli.learn.contingency.goal_gap`)."""
+    if goal_gap(a.smc, b.smc, params) >= params.t_ha:
         return False
     return d_p_stored(a.smc.perception, b.smc.perception, params) < params.t_hp
 
@@ -287,6 +300,8 @@ class TreeExecutor:
         self.max_time = max_time
         self._stacks: dict[tuple[str, ...], EdgeStack] = {}
         self._last_cmd = PoiCommand(sensors.t, sensors.poi(), 1.0)
+        self._scan_alignment: dict[str, np.ndarray] = {}
+        """At a base's decision: each matched edge's scan alignment T (3, 3)."""
         self._weights: deque[tuple[float, float]] = deque()
         """Recent scale readings (t [s], kg), the last ``weight_window`` of them."""
 
@@ -318,6 +333,8 @@ class TreeExecutor:
     def decide(
         self, nodes: tuple[str, ...]
     ) -> tuple[Decision, Edge | None, Cluster | None, CameraFrame]:
+        if self.sensors.has_lidar:
+            return self.decide_base(nodes)
         t = self.sensors.t
         frame, clusters, weight, perceive_s = self.perceive()
         t0 = time.perf_counter()
@@ -345,8 +362,82 @@ class TreeExecutor:
         )
         return dec, edge, cluster, frame
 
-    def map_goal(self, action: Action, cluster: Cluster | None, start: np.ndarray) -> np.ndarray:
+    def decide_base(
+        self, nodes: tuple[str, ...]
+    ) -> tuple[Decision, Edge | None, None, CameraFrame]:
+        """A mobile base's decision point (paper 4.2.4): the room's colours and the lidar
+        scan against each child SMC's (eq. 36, 45); a scan is matched by aligning it to the
+        stored one (ICP), whose transform then maps the goal (eq. 38-39, :meth:`map_goal`)."""
+        t = self.sensors.t
+        t0 = time.perf_counter()
+        frame = self.sensors.render_camera()
+        room = room_histogram(frame.rgb, self.params.perception)
+        scan = self.sensors.lidar()
+        lidar_pose = self.sensors.lidar_pose()
+        perceive_s = time.perf_counter() - t0
+        t1 = time.perf_counter()
+        icp_s = 0.0
+        self._scan_alignment = {}
+        cands = []
+        for e in self.stack(nodes).edges:
+            stored = e.smc.perception
+            terms: list[tuple[str, float]] = []
+            d = math.inf if stored.room is None else 0.0
+            if stored.room is not None:
+                terms.append(("room", d_room(room, stored.room, self.params.perception)))
+            if stored.scan is not None:
+                t2 = time.perf_counter()
+                try:
+                    al = align_scans(stored.scan, scan, self.params.scan) if scan else None
+                except ValueError:  # too few returns (a blind lidar) to align
+                    al = None
+                icp_s += time.perf_counter() - t2
+                if al is None:
+                    d = math.inf
+                else:
+                    scale = self.params.scan.distance_scale
+                    dist = chamfer(stored.scan, scan, al.T_target_source, self.params.scan)
+                    terms.append(("scan", dist / scale))
+                    self._scan_alignment[e.id] = al.T_target_source
+                    terms.append(("icp_fitness", al.fitness))
+            if math.isfinite(d):
+                d = sum(v for k, v in terms if k != "icp_fitness")
+            cands.append(
+                Candidate(e.id, e.parent, d, d < self.params.t_hp, None, tuple(terms))
+            )
+        ok = [c for c in cands if c.contingent]
+        chosen = min(ok, key=lambda c: c.d_p) if ok else None
+        edge = None if chosen is None else next(e for e in self.stack(nodes).edges if e.id == chosen.edge)
+        dec = Decision(
+            t=t,
+            nodes=nodes,
+            candidates=tuple(cands),
+            chosen=None if edge is None else edge.id,
+            mapped_goal=None,
+            n_clusters=0,
+            weight=None,
+            perceive_s=perceive_s,
+            match_s=time.perf_counter() - t1,
+            icp_s=icp_s,
+            lidar_pose=lidar_pose,
+        )
+        return dec, edge, None, frame
+
+    def map_goal(
+        self, action: Action, cluster: Cluster | None, start: np.ndarray, edge: str | None = None
+    ) -> np.ndarray:
         """Contingent action mapping of the goal (eq. 38-39, 46)."""
+        if action.goal_frame == "scan":
+            # G_now = L_now * T^-1 * G_rel, T = the current lidar in the demo lidar's frame,
+            # from the alignment that matched the scan (decide_base).
+            T = self._scan_alignment[edge]
+            lidar_now = self.sensors.lidar_pose()
+            x, y, yaw = map_goal(action.goal[[0, 1, 3]], T, lidar_now)
+            return np.array([x, y, 0.0, start[3] + wrap(float(yaw - start[3]))])
+        if self.sensors.robot.gripper is None:  # a base's world goal: its heading as taught
+            goal = np.array(action.goal, dtype=float)
+            goal[3] = start[3] + wrap(float(goal[3] - start[3]))
+            return goal
         # A parallel gripper is symmetric under a half turn, so the wrist may take the short
         # way round, unless the object grasped or held has no symmetry: then the half turn
         # would put its other side where the demonstration put this one.
@@ -477,7 +568,7 @@ class TreeExecutor:
                     path,
                 )
             start = self.sensors.poi()
-            goal = self.map_goal(edge.smc.action, cluster, start)
+            goal = self.map_goal(edge.smc.action, cluster, start, edge.id)
             duration = self.duration(edge.smc.action, start, goal)
             dec = Decision(**{**_fields(dec), "mapped_goal": goal, "duration": duration})
             decisions.append(dec)

@@ -11,6 +11,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from smccli.perception.scan import Scan2D
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
 from smccli.world.sim import Sim
 
@@ -33,6 +34,8 @@ class Sensors:
         """Control period [s]."""
         self.has_scale = sim.scene.scale is not None
         """The scene has a scale under the table."""
+        self.has_lidar = sim.lidar_pose() is not None
+        """The robot has a 2-D lidar."""
 
     @property
     def t(self) -> float:
@@ -63,6 +66,18 @@ class Sensors:
     def weight(self) -> float | None:
         """Scale reading [kg]; None without a scale."""
         return self._sim.weight()
+
+    def lidar(self) -> Scan2D | None:
+        """A scan of the robot's lidar, in its own frame, None without a lidar. (The
+        simulator's reading also carries the true pose; control gets :meth:`lidar_pose`.)"""
+        r = self._sim.lidar()
+        if r is None:
+            return None
+        return Scan2D(r.ranges, r.angle_min, r.angle_increment, r.range_max)
+
+    def lidar_pose(self) -> np.ndarray | None:
+        """The lidar's pose ``[x, y, yaw]`` from odometry and its mounting [m, m, rad]."""
+        return self._sim.lidar_pose()
 
     def render_camera(self) -> CameraFrame:
         return self._sim.render_camera()

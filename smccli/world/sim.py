@@ -496,7 +496,7 @@ class Sim:
         """The scene's success criterion for ``task`` (default: any task succeeds)."""
         crits = [c for c in self.scene.success if task is None or c.task == task]
         if task is None:  # only the criteria of the variant on show
-            crits = [c for c in crits if c.variant is None or self._shows(c.variant)]
+            crits = [c for c in crits if c.variant is None or self.shows(c.variant)]
             if not crits:
                 return Success(False, "no task's criterion applies to this layout")
         if not crits:
@@ -516,7 +516,7 @@ class Sim:
         return Success(False, " | ".join(reasons))
 
 
-    def _shows(self, variant: str) -> bool:
+    def shows(self, variant: str) -> bool:
         """Whether the layout shows every object of ``variant``."""
         return set(dict(self.scene.variants)[variant]) <= set(self.present)
 
