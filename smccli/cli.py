@@ -303,9 +303,10 @@ def _print_campaign(summary: dict[str, Any]) -> None:
     out.print(f"failures: {fails}")
     lat, dur = summary["latency_ms"], summary["duration_s"]
     if lat["p50"] is not None:
+        icp = f", of which ICP p50 {lat['icp_p50']:.1f} ms" if lat.get("icp_p50") else ""
         out.print(
             f"decision latency p50 {lat['p50']:.1f} ms, p95 {lat['p95']:.1f} ms "
-            f"(match p50 {lat['match_p50']:.3f} ms)"
+            f"(match p50 {lat['match_p50']:.3f} ms{icp})"
         )
     if dur["p50"] is not None:
         out.print(
@@ -338,9 +339,21 @@ def replay(
         float | None, typer.Option(help="Exit 1 if the campaign's success rate is below this.")
     ] = None,
     force: Annotated[bool, typer.Option(help="Overwrite existing outputs.")] = False,
+    odometry_drift: Annotated[
+        float,
+        typer.Option(
+            help="A mobile base's odometry error: distance off by this fraction and heading "
+            "off by this many rad per metre driven (e.g. 0.02).",
+            min=0.0,
+            max=0.5,
+        ),
+    ] = 0.0,
 ) -> None:
     """Execute the tree autonomously in simulation: one episode or a campaign."""
     from smccli.execute import run_campaign, run_episode
+    from smccli.world.sim import OdometryDrift
+
+    drift = OdometryDrift(odometry_drift, odometry_drift) if odometry_drift > 0 else None
 
     if trials > 0:
         with Progress(
@@ -366,6 +379,7 @@ def replay(
                 report=report,
                 force=force,
                 on_trial=on_trial,
+                drift=drift,
             )
         _print_campaign(summary)
         if min_success is not None and summary["success_rate"] < min_success:
@@ -375,7 +389,14 @@ def replay(
             raise typer.Exit(1)
         return
     result = run_episode(
-        tree, scene=scene, seed=seed, layout=layout, output=output, report=report, force=force
+        tree,
+        scene=scene,
+        seed=seed,
+        layout=layout,
+        output=output,
+        report=report,
+        force=force,
+        drift=drift,
     )
     _print_episode(result)
     if result.outcome != "success":

@@ -35,10 +35,13 @@ from smccli.execute.episode import episode, layout_for, resolve, scene_note  # n
 from smccli.execute.evaluation import OUTCOMES  # noqa: E402
 from smccli.learn.tree import Tree, digest  # noqa: E402
 from smccli.outputs import check_output, write_atomic  # noqa: E402
-from smccli.world.scene import Scene  # noqa: E402
+from smccli.world.scene import ROBOT_KEY, Scene  # noqa: E402
+from smccli.world.sim import OdometryDrift  # noqa: E402
 
 BANDS = (0.0, 0.05, 0.10, 0.15, 0.20, 0.25, 0.30, math.inf)
 """Edges of the distance bands [m] (paper Fig. 11 uses rings around the demonstrated pose)."""
+BASE_BANDS = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, math.inf)
+"""Edges of the bands of a mobile base's start distance from the scene's nominal start [m]."""
 FAILURES = tuple(o for o in OUTCOMES if o != "success")
 
 
@@ -74,6 +77,8 @@ class TrialResult:
     """Per decision: render + clusters [ms]."""
     match_ms: list[float]
     """Per decision: matching the candidates [ms]."""
+    icp_ms: list[float]
+    """Per decision: aligning scans, part of matching (mobile base) [ms]."""
     duration: float
     """Task duration [s of sim time]."""
     demo_duration: float
@@ -86,13 +91,21 @@ class TrialResult:
     """Object poses at the start."""
 
 
-def run_trial(tree: Tree, scene: Scene, seed: int, index: int) -> TrialResult:
-    """Trial ``index`` of the campaign with ``seed``."""
+def run_trial(
+    tree: Tree, scene: Scene, seed: int, index: int, drift: OdometryDrift | None = None
+) -> TrialResult:
+    """Trial ``index`` of the campaign with ``seed``; the distance bands are over the
+    manipulated object's start, or a mobile base's."""
     layout = layout_for(scene, seed, index)
-    r = episode(tree, scene, layout, seed=seed)
+    r = episode(tree, scene, layout, seed=seed, drift=drift)
     obj = r.manipulated
     dist = yaw = 0.0
-    if obj is not None:
+    if scene.start is not None and ROBOT_KEY in layout:
+        obj = ROBOT_KEY
+        x, y, _, a = layout[ROBOT_KEY]
+        dist = math.dist((x, y), scene.start.pose[:2])
+        yaw = abs(math.remainder(a - scene.start.pose[2], 2 * math.pi))
+    elif obj is not None:
         spec = scene.object(obj)
         dist = math.dist(layout[obj][:2], spec.pose[:2])
         yaw = abs(math.remainder(layout[obj][3] - spec.pose[3], 2 * math.pi))
@@ -107,6 +120,7 @@ def run_trial(tree: Tree, scene: Scene, seed: int, index: int) -> TrialResult:
         latency_ms=r.latencies_ms,
         perceive_ms=[1e3 * d.perceive_s for d in r.decisions],
         match_ms=[1e3 * d.match_s for d in r.decisions],
+        icp_ms=[1e3 * d.icp_s for d in r.decisions],
         duration=r.duration,
         demo_duration=r.demo_duration,
         wall_time=r.wall_time,
@@ -120,12 +134,13 @@ def run_trial(tree: Tree, scene: Scene, seed: int, index: int) -> TrialResult:
 _WORKER: dict[str, Any] = {}
 
 
-def _init_worker(tree: Tree, scene: Scene, seed: int) -> None:
-    _WORKER.update(tree=tree, scene=scene, seed=seed)
+def _init_worker(tree: Tree, scene: Scene, seed: int, drift: OdometryDrift | None) -> None:
+    _WORKER.update(tree=tree, scene=scene, seed=seed, drift=drift)
 
 
 def _work(index: int) -> TrialResult:
-    return run_trial(_WORKER["tree"], _WORKER["scene"], _WORKER["seed"], index)
+    w = _WORKER
+    return run_trial(w["tree"], w["scene"], w["seed"], index, w["drift"])
 
 
 def run_trials(
@@ -137,6 +152,7 @@ def run_trials(
     workers: int = 1,
     on_trial: Callable[[int, int], None] | None = None,
     indices: Sequence[int] | None = None,
+    drift: OdometryDrift | None = None,
 ) -> list[TrialResult]:
     """Run the trials (``range(trials)`` or ``indices``) over ``workers`` processes;
     results in index order. ``on_trial(done, successes)`` after each."""
@@ -145,14 +161,14 @@ def run_trials(
     ok = 0
     if workers <= 1 or len(todo) <= 1:
         for i in todo:
-            results.append(run_trial(tree, scene, seed, i))
+            results.append(run_trial(tree, scene, seed, i, drift))
             ok += results[-1].success
             if on_trial:
                 on_trial(len(results), ok)
     else:
         ctx = mp.get_context("spawn")
         with ctx.Pool(
-            min(workers, len(todo)), initializer=_init_worker, initargs=(tree, scene, seed)
+            min(workers, len(todo)), initializer=_init_worker, initargs=(tree, scene, seed, drift)
         ) as pool:
             for res in pool.imap_unordered(_work, todo, chunksize=1):
                 results.append(res)
@@ -202,6 +218,7 @@ def summarize(
     lat = [v for r in results for v in r.latency_ms]
     per = [v for r in results for v in r.perceive_ms]
     mat = [v for r in results for v in r.match_ms]
+    icp = [v for r in results for v in r.icp_ms]
     done = [r for r in results if r.success]
     dur = [r.duration for r in done]
     ratio = [r.duration / r.demo_duration for r in done if r.demo_duration > 0]
@@ -223,6 +240,10 @@ def summarize(
             "max": max(lat, default=None),
             "perceive_p50": _pct(per, 50),
             "match_p50": _pct(mat, 50),
+            "match_p95": _pct(mat, 95),
+            "perceive_p95": _pct(per, 95),
+            "icp_p50": _pct(icp, 50),
+            "icp_p95": _pct(icp, 95),
             "decisions": len(lat),
         },
         "duration_s": {
@@ -247,6 +268,7 @@ def run_campaign(
     report: Path | None = None,
     on_trial: Callable[[int, int], None] | None = None,
     force: bool = False,
+    drift: OdometryDrift | None = None,
 ) -> dict[str, Any]:
     """``smc replay TREE --trials N --seed S --workers W [--report FILE]``: the summary.
 
@@ -259,12 +281,21 @@ def run_campaign(
         check_output(report, force=force)
     t, sc = resolve(tree, scene)
     wall0 = time.perf_counter()
-    results = run_trials(t, sc, trials=trials, seed=seed, workers=workers, on_trial=on_trial)
+    results = run_trials(
+        t, sc, trials=trials, seed=seed, workers=workers, on_trial=on_trial, drift=drift
+    )
     summary = summarize(
-        results, scene=sc, tree=t, seed=seed, workers=workers, wall_s=time.perf_counter() - wall0
+        results,
+        scene=sc,
+        tree=t,
+        seed=seed,
+        workers=workers,
+        wall_s=time.perf_counter() - wall0,
+        bands=BASE_BANDS if sc.start is not None else BANDS,
     )
     summary["tree"] = None if isinstance(tree, Tree) else str(tree)
     summary["note"] = scene_note(t, sc)
+    summary["odometry_drift"] = None if drift is None else asdict(drift)
     if report is not None:
         write_atomic(report, json.dumps(summary, indent=1, allow_nan=False) + "\n")
     return summary

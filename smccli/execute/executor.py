@@ -40,7 +40,7 @@ from smccli.learn.smc import TWO_PI, Action, goal_from_object
 from smccli.learn.tree import ROOT, Edge, Tree
 from smccli.perception import Cluster, clusters_from_frame, scale_reading
 from smccli.perception.room import d_room, room_histogram
-from smccli.perception.scan import align_scans, chamfer, map_goal
+from smccli.perception.scan import align_scans, chamfer, map_goal, pose_to_se2, se2_to_pose
 from smccli.world.controller import reachable, wrap
 from smccli.world.sensors import CameraFrame, PoiCommand
 
@@ -59,6 +59,14 @@ MAX_YAW_RATE = 1.5
 """A rollout lasts at least |yaw change| / this [s] (the wrist's comfortable speed) [rad/s]."""
 MIN_DURATION = 0.5
 """Shortest rollout [s]."""
+RELOCALIZE_PERIOD = 0.5
+"""While a base drives to a goal stored with a scan, it aligns its scan to that scan this
+often and corrects its odometry-frame goal and path (closed loop: odometry drifts) [s]."""
+RELOCALIZE_MIN_FITNESS = 0.3
+"""An alignment corrects the goal only when this share of the current scan's returns lie
+within ``inlier_distance`` of the stored scan (the robot still sees the stored place)."""
+RELOCALIZE_MAX_STEP = (0.3, 0.2)
+"""Largest correction one alignment may make [m, rad]; a larger one is a wrong match."""
 MIDWAY_PHASE = 0.95
 """A gripper switch before this phase of a fragment happens midway through the rollout."""
 
@@ -498,8 +506,11 @@ class TreeExecutor:
         # that phase, hold there while the fingers move, then go on with the new opening.
         midway = a.event != "none" and a.gripper_phase < MIDWAY_PHASE
         k = int(round(a.gripper_phase * (len(path) - 1))) if midway else len(path) - 1
-        for y in path[1 : k + 1]:
-            self._send(PoiCommand(s.t, y, grip))
+        if a.goal_frame == "scan" and edge.id in self._scan_alignment:
+            goal = self._stream_relocalized(edge, path, goal)
+        else:
+            for y in path[1 : k + 1]:
+                self._send(PoiCommand(s.t, y, grip))
         if midway:
             self._arrive(path[k], grip)
             self._gripper_event(path[k], end)
@@ -518,6 +529,45 @@ class TreeExecutor:
             opening_after=s.gripper_opening(),
             arrived=arrived,
         )
+
+    def _stream_relocalized(self, edge: Edge, path: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """Stream a base's rollout ``path`` (n, 4) while tracking the stored scan: every
+        RELOCALIZE_PERIOD the current scan is aligned to it from odometry's prediction; the
+        correction of where the demo's lidar frame sits in odometry's frame moves the rest of
+        the path and the goal. Returns the corrected goal."""
+        s = self.sensors
+        stored = edge.smc.perception.scan
+        assert stored is not None
+        T0 = self._scan_alignment[edge.id]
+        # D: the demo lidar's frame in today's odometry frame (D = L * T^-1).
+        D = pose_to_se2(s.lidar_pose()) @ np.linalg.inv(T0)
+        path = path.copy()
+        next_fix = s.t + RELOCALIZE_PERIOD
+        i = 1
+        while i < len(path):
+            self._send(PoiCommand(s.t, path[i], 1.0))
+            i += 1
+            if s.t < next_fix - 1e-9:
+                continue
+            next_fix = s.t + RELOCALIZE_PERIOD
+            scan, L = s.lidar(), pose_to_se2(s.lidar_pose())
+            try:
+                al = align_scans(
+                    stored, scan, self.params.scan, initial=np.linalg.inv(D) @ L, search=False
+                )
+            except ValueError:
+                continue
+            if al.fitness < RELOCALIZE_MIN_FITNESS:
+                continue  # out of sight of the stored place: odometry alone from here
+            D_new = L @ np.linalg.inv(al.T_target_source)
+            cx, cy, cyaw = se2_to_pose(D_new @ np.linalg.inv(D))
+            if math.hypot(cx, cy) > RELOCALIZE_MAX_STEP[0] or abs(cyaw) > RELOCALIZE_MAX_STEP[1]:
+                continue
+            C = D_new @ np.linalg.inv(D)
+            path[i:] = _move_poses(path[i:], C)
+            goal = _move_poses(goal[None, :], C)[0]
+            D = D_new
+        return goal
 
     def _arrive(self, target: np.ndarray, grip: float) -> bool:
         """Hold ``target`` until the POI is within the tolerance (at most MAX_HOLD)."""
@@ -589,6 +639,15 @@ class TreeExecutor:
             nodes = tuple(
                 e.child for e in siblings if e is edge or equivalent(e, edge, self.params)
             )
+
+
+def _move_poses(poses: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """Base poses (n, 4) ``[x, y, z, yaw]`` moved by the SE(2) transform ``C`` (3, 3); yaws
+    stay unwrapped."""
+    out = poses.copy()
+    out[:, :2] = poses[:, :2] @ C[:2, :2].T + C[:2, 2]
+    out[:, 3] = poses[:, 3] + math.atan2(C[1, 0], C[0, 0])
+    return out
 
 
 def _fields(obj: Any) -> dict[str, Any]:

@@ -255,13 +255,16 @@ def align_scans(
     params: ScanParams | None = None,
     *,
     initial: np.ndarray | None = None,
+    search: bool = True,
 ) -> ScanAlignment:
     """SE(2) transform mapping ``source`` points into ``target``'s frame, by multi-seed ICP.
 
     Each of ``n_seeds`` yaws, with the translation that aligns the centroids, is refined
     by ICP with the ``coarse_distances`` stages; the seed with the best fitness (ties
     within ``fitness_tie`` broken by RMSE) gets a last stage at ``fine_distance``.
-    ``initial`` (3, 3), when given (e.g. from odometry), is tried as one more seed.
+    ``initial`` (3, 3), when given (e.g. from odometry), is tried as one more seed; with
+    ``search=False`` it is the only one (tracking a scan already aligned: about 3 ms
+    instead of 40-90 ms).
     Every stage's result is projected onto SE(2). A room with a rotational symmetry (an
     empty rectangle) has as many equally good answers; furniture breaks the tie.
     """
@@ -287,7 +290,7 @@ def align_scans(
 
     c_t, c_s = xy_t.mean(axis=0), xy_s.mean(axis=0)
     seeds = []
-    for yaw in 2 * np.pi * np.arange(params.n_seeds) / params.n_seeds:
+    for yaw in 2 * np.pi * np.arange(params.n_seeds if search or initial is None else 0) / max(params.n_seeds, 1):
         T = pose_to_se2((0.0, 0.0, yaw))
         T[:2, 2] = c_t - T[:2, :2] @ c_s
         seeds.append(T)
