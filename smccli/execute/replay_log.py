@@ -59,6 +59,7 @@ class ReplayLog:
         t = sim.t
         if t >= self.next_cam - 1e-9:
             w.write_camera(sim.render_camera())
+            w.write_lidar(sim)  # on the camera's clock, as when recording
             self.next_cam += self.cam_period
         if t >= self.next_gt - 1e-9:
             w.write_ground_truth(t, sim.ground_truth())  # evaluation topic, not read by control
@@ -74,8 +75,11 @@ class ReplayLog:
         self._state()
 
     def on_decision(self, dec: Decision, frame: CameraFrame, _start: np.ndarray) -> None:
-        pts, cols, _ = object_points(frame, self.sim.robot_geometry(), self.params.perception)
-        self.writer.write_point_cloud(dec.t, pts, cols)
+        if self.sim.lidar_pose() is None:  # an arm's decision: the objects it saw
+            pts, cols, _ = object_points(frame, self.sim.robot_geometry(), self.params.perception)
+            self.writer.write_point_cloud(dec.t, pts, cols)
+        else:  # a base's: the scan it matched
+            self.writer.write_lidar(self.sim)
         self.writer.write_json("/smc/decision", dec.t, dec.to_json())
 
     def close(self) -> None:

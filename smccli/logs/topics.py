@@ -36,6 +36,7 @@ DEPTH = "/camera/depth"
 CALIBRATION = "/camera/calibration"
 TF = "/tf"
 SCAN = "/lidar/scan"
+SCAN_POINTS = "/lidar/points"
 POINTS = "/perception/points"
 WEIGHT = "/scale/weight"
 SALIENCY = "/saliency"
@@ -50,6 +51,7 @@ PROTO_TOPICS: dict[str, type[ProtoMessage]] = {
     CALIBRATION: CameraCalibration,
     TF: FrameTransforms,
     SCAN: LaserScan,
+    SCAN_POINTS: PointCloud,
     POINTS: PointCloud,
 }
 """Protobuf topic -> Foxglove message class."""

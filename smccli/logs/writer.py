@@ -30,6 +30,7 @@ from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMa
 
 if TYPE_CHECKING:
     from smccli.world.scene import Scene
+    from smccli.world.sim import Sim
 
 
 def part_path(path: Path) -> Path:
@@ -330,8 +331,10 @@ class LogWriter:
         points: np.ndarray,
         colors: np.ndarray | None = None,
         frame_id: str = tp.WORLD,
+        topic: str = tp.POINTS,
     ) -> None:
-        """Points (N, 3) float32 [m] in ``frame_id``, optional colours (N, 3) uint8 RGB."""
+        """Points (N, 3) float32 [m] in ``frame_id``, optional colours (N, 3) uint8 RGB, on
+        ``topic``."""
         pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
         msg = PointCloud(frame_id=frame_id)
         tp.stamp(msg, tp.to_ns(t))
@@ -352,7 +355,7 @@ class LogWriter:
                 msg.fields.add(name=name, offset=12 + i, type=F.UINT8)
             msg.point_stride = 16
             msg.data = rec.tobytes()
-        self._proto(tp.POINTS, tp.to_ns(t), msg)
+        self._proto(topic, tp.to_ns(t), msg)
 
     def write_scan(
         self,
@@ -364,11 +367,17 @@ class LogWriter:
         intensities: np.ndarray | None = None,
         frame_id: str = "lidar",
         T_frame_scan: np.ndarray | None = None,
+        T_world_frame: np.ndarray | None = None,
     ) -> None:
         """A planar scan: ``ranges`` (N,) [m] evenly spaced from start to end angle [rad].
 
-        ``T_frame_scan`` (4, 4) is the scan origin in ``frame_id`` (identity by default).
+        ``T_frame_scan`` (4, 4) is the scan origin in ``frame_id`` (identity by default);
+        ``T_world_frame`` (4, 4), when given, is also published on ``/tf`` (world ->
+        ``frame_id``), so viewers place the scan in the world.
         """
+        if T_world_frame is not None:
+            W = np.asarray(T_world_frame, dtype=float)
+            self._tf(tp.to_ns(t), frame_id, W[:3, 3], tp.matrix_to_quat(W[:3, :3]))
         msg = LaserScan(frame_id=frame_id, start_angle=start_angle, end_angle=end_angle)
         tp.stamp(msg, tp.to_ns(t))
         msg.ranges.extend(np.asarray(ranges, dtype=float).tolist())
@@ -377,6 +386,31 @@ class LogWriter:
         T = np.eye(4) if T_frame_scan is None else np.asarray(T_frame_scan, dtype=float)
         tp.set_pose(msg.pose, T[:3, 3], tp.matrix_to_quat(T[:3, :3]))
         self._proto(tp.SCAN, tp.to_ns(t), msg)
+
+
+    def write_lidar(self, sim: Sim) -> None:
+        """The robot's lidar scan now, if it has one: ``/lidar/scan`` in the lidar's own
+        frame, and that frame on ``/tf`` where odometry puts it (the lidar's height from its
+        mounting)."""
+        scan = sim.lidar()
+        pose = sim.lidar_pose()
+        if scan is None or pose is None:
+            return
+        end = scan.angle_min + scan.angle_increment * (len(scan.ranges) - 1)
+        x, y, yaw = pose
+        T = np.eye(4)
+        T[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
+        T[:3, 3] = [x, y, sim.lidar_height()]
+        self.write_scan(
+            scan.t, scan.ranges, start_angle=scan.angle_min, end_angle=end, T_world_frame=T
+        )
+        # The returns as points too: viewers without a LaserScan decoder (Rerun's MCAP
+        # importer) show these in the lidar's frame.
+        ok = np.isfinite(scan.ranges)
+        a = scan.angle_min + scan.angle_increment * np.flatnonzero(ok)
+        r = scan.ranges[ok]
+        pts = np.stack([r * np.cos(a), r * np.sin(a), np.zeros_like(r)], axis=1)
+        self.write_point_cloud(scan.t, pts, frame_id="lidar", topic=tp.SCAN_POINTS)
 
 
 def scene_attachments(scene: Scene) -> dict[str, tuple[str, bytes]]:

@@ -217,7 +217,7 @@ def _session(
         if t >= next_cam - 1e-9:
             frame = sim.render_camera() if t > 0 else frame
             writer.write_camera(frame)
-            _log_scan(writer, sim)  # the lidar runs on the camera's 10 Hz clock
+            writer.write_lidar(sim)  # the lidar runs on the camera's 10 Hz clock
             next_cam += cam_period
         if t >= next_gt - 1e-9:
             writer.write_ground_truth(t, sim.ground_truth())
@@ -254,15 +254,6 @@ def _session(
     if getattr(operator, "discarded", False):
         raise ScriptError("recording discarded by the operator; nothing written")
     return marks
-
-
-def _log_scan(writer: LogWriter, sim: Sim) -> None:
-    """The robot's lidar scan, if it has one: ``/lidar/scan`` in the lidar's own frame."""
-    scan = sim.lidar()
-    if scan is None:
-        return
-    end = scan.angle_min + scan.angle_increment * (len(scan.ranges) - 1)
-    writer.write_scan(scan.t, scan.ranges, start_angle=scan.angle_min, end_angle=end)
 
 
 @contextmanager

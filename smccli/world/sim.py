@@ -283,6 +283,10 @@ class Sim:
             return np.array([x, y, 0.0, wrap(float(yaw))])
         return poi_pose(self.data, self.poi_id)
 
+    def lidar_height(self) -> float:
+        """Height of the lidar's scan plane above the floor [m] (a fixed mounting)."""
+        return float(self.data.site_xpos[self._lidar_site][2]) if self._lidar_site >= 0 else 0.0
+
     def lidar_pose(self) -> np.ndarray | None:
         """The lidar's planar pose ``[x, y, yaw]`` in odometry's frame (the POI composed
         with the lidar's fixed mounting on the robot), None without a lidar."""
