@@ -96,6 +96,7 @@ def write_demo(
         w.write_point_cloud(1.1, pts)
         written["pc"] = [(pts, cols), (pts, None)]
         w.write_scan(1.0, np.linspace(0.5, 2.0, 90), start_angle=-1.0, end_angle=1.0)
+        w.write_point_cloud(1.0, pts, frame_id="lidar", topic=tp.SCAN_POINTS)
         dec = {
             "node": 3,
             "candidates": [{"edge": "a", "d_p": 0.1, "d_a": 0.2}],
@@ -408,8 +409,8 @@ def test_errors_name_the_file_and_problem(tmp_path: Path, demo: tuple[Path, dict
     with pytest.raises(LogError, match=r"not a file"):
         read_log(tmp_path)
     path, _ = demo
-    with pytest.raises(LogError, match=r"demo.mcap: topic /lidar/points missing \(topics present"):
-        read_log(path, required_topics=[tp.DEPTH, "/lidar/points"])
+    with pytest.raises(LogError, match=r"demo.mcap: topic /radar/points missing \(topics present"):
+        read_log(path, required_topics=[tp.DEPTH, "/radar/points"])
 
     from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 

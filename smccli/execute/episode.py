@@ -246,7 +246,13 @@ def episode(
     if evaluate is not None:
         evaluate(sim)
     verdict = score(
-        sim, scene, layout, outcome=outcome, reason=reason, actions=actions, collisions=sorted(touched)
+        sim,
+        scene,
+        layout,
+        outcome=outcome,
+        reason=reason,
+        actions=actions,
+        collisions=sorted(touched),
     )
     return EpisodeResult(
         outcome=verdict.outcome,

@@ -410,12 +410,14 @@ class TreeExecutor:
                     terms.append(("icp_fitness", al.fitness))
             if math.isfinite(d):
                 d = sum(v for k, v in terms if k != "icp_fitness")
-            cands.append(
-                Candidate(e.id, e.parent, d, d < self.params.t_hp, None, tuple(terms))
-            )
+            cands.append(Candidate(e.id, e.parent, d, d < self.params.t_hp, None, tuple(terms)))
         ok = [c for c in cands if c.contingent]
         chosen = min(ok, key=lambda c: c.d_p) if ok else None
-        edge = None if chosen is None else next(e for e in self.stack(nodes).edges if e.id == chosen.edge)
+        edge = (
+            None
+            if chosen is None
+            else next(e for e in self.stack(nodes).edges if e.id == chosen.edge)
+        )
         dec = Decision(
             t=t,
             nodes=nodes,

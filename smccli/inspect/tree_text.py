@@ -29,7 +29,9 @@ def describe_perception(smc: Smc, params: PerceptionParams | None = None) -> str
         parts.append(f"room mostly {colour_name(rgb)}")
     if smc.perception.scan is not None and smc.perception.scan_pose is not None:
         x, y, _ = smc.perception.scan_pose
-        parts.append(f"scan of {int(smc.perception.scan.valid().sum())} returns at ({x:.2f}, {y:.2f})")
+        parts.append(
+            f"scan of {int(smc.perception.scan.valid().sum())} returns at ({x:.2f}, {y:.2f})"
+        )
     return ", ".join(parts) or "nothing localized"
 
 

@@ -52,7 +52,13 @@ REQUIRED_TOPICS = {
     "/camera/calibration",
 }
 #: Topics every mobile-base log must hold for compile.
-BASE_TOPICS = {"/teleop/command", "/robot/poi", "/robot/joint_states", "/camera/color", "/lidar/scan"}
+BASE_TOPICS = {
+    "/teleop/command",
+    "/robot/poi",
+    "/robot/joint_states",
+    "/camera/color",
+    "/lidar/scan",
+}
 #: Topics compile reads; the ground truth is deliberately not among them.
 READ_TOPICS = REQUIRED_TOPICS | BASE_TOPICS | {"/tf", "/scale/weight", "/saliency"}
 
@@ -231,7 +237,9 @@ def _base_smcs(
         poi = log.poi[int(np.argmin(np.abs(log.poi_t - msg.t)))]
         lidar_pose = pose_compose(np.array([poi[0], poi[1], poi[3]]), mount)
         goal = log.poi[int(np.argmin(np.abs(log.poi_t - frag.t1)))]
-        salient = bool(np.hypot(goal[0] - lidar_pose[0], goal[1] - lidar_pose[1]) < params.scan_epsilon)
+        salient = bool(
+            np.hypot(goal[0] - lidar_pose[0], goal[1] - lidar_pose[1]) < params.scan_epsilon
+        )
         if not salient:
             warnings.append(
                 f"{name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends farther than "

@@ -9,7 +9,8 @@ Perception sets of different kinds (a cluster on one side only) are never contin
 D_A is physical, in metres: the distance between the two goals in the salient object's
 frame (position, plus ``yaw_scale`` metres per radian of yaw; for a base, in the frame of
 the salient scan, the other scan's goal carried over by the ICP transform between the two
-scans) plus the RMS distance of the two approaches (the paths' last ``approach_length`` metres, relative to the goal), both
+scans) plus the RMS distance of the two approaches (the paths' last ``approach_length``
+metres, relative to the goal), both
 taken at the object's symmetric equivalent that fits best. The paper's T_hA = 0.02 then
 reads "the same goal relative to the object, reached the same way, within 2 cm", whatever
 the layout the demonstrations started from (docs/choices.md). Actions with different
@@ -44,7 +45,9 @@ from smccli.perception.scan import align_scans, chamfer, pose_compose, se2_to_po
 INF = math.inf
 
 
-def scan_transform(a: SalientPerceptions, b: SalientPerceptions, params: SmcParams) -> np.ndarray | None:
+def scan_transform(
+    a: SalientPerceptions, b: SalientPerceptions, params: SmcParams
+) -> np.ndarray | None:
     """Where ``b``'s lidar sat in ``a``'s lidar frame, by ICP of their scans: SE(2) (3, 3);
     None unless both hold a scan."""
     if a.scan is None or b.scan is None:
@@ -167,7 +170,11 @@ def goal_gap(a: Smc, b: Smc, params: SmcParams) -> float:
     if pa.goal_frame == "scan":
         T_ab = scan_transform(a.perception, b.perception, params)
         return INF if T_ab is None else _pose_gap(pa.goal, goal_in_a(pb, T_ab), params)
-    if pa.goal_frame == "world" and pa.symmetry >= TWO_PI - 1e-6 and pa.held_symmetry >= TWO_PI - 1e-6:
+    if (
+        pa.goal_frame == "world"
+        and pa.symmetry >= TWO_PI - 1e-6
+        and pa.held_symmetry >= TWO_PI - 1e-6
+    ):
         return _pose_gap(pa.goal, pb.goal, params)  # a base: no gripper's half turn
     return align(pa, pb, params).goal
 

@@ -387,7 +387,6 @@ class LogWriter:
         tp.set_pose(msg.pose, T[:3, 3], tp.matrix_to_quat(T[:3, :3]))
         self._proto(tp.SCAN, tp.to_ns(t), msg)
 
-
     def write_lidar(self, sim: Sim) -> None:
         """The robot's lidar scan now, if it has one: ``/lidar/scan`` in the lidar's own
         frame, and that frame on ``/tf`` where odometry puts it (the lidar's height from its

@@ -290,7 +290,12 @@ def align_scans(
 
     c_t, c_s = xy_t.mean(axis=0), xy_s.mean(axis=0)
     seeds = []
-    for yaw in 2 * np.pi * np.arange(params.n_seeds if search or initial is None else 0) / max(params.n_seeds, 1):
+    for yaw in (
+        2
+        * np.pi
+        * np.arange(params.n_seeds if search or initial is None else 0)
+        / max(params.n_seeds, 1)
+    ):
         T = pose_to_se2((0.0, 0.0, yaw))
         T[:2, 2] = c_t - T[:2, :2] @ c_s
         seeds.append(T)

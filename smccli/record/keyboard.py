@@ -34,8 +34,9 @@ X              discard: delete the log
 
 Holding a key. MuJoCo 4.0's passive viewer calls ``key_callback`` with the key code for a
 press only: its GLFW adapter drops GLFW's repeat and release events (measured under Xvfb:
-holding Up for 1.5 s gives one call). So the callback cannot tell a held key from a tap,
-and a "each press or repeat renews a short hold" scheme would stop after the first window.
+holding Up for 1.5 s gives one call, while GLFW itself sees auto-repeat every 40 ms after
+0.66 s). So the callback cannot tell a held key from a tap, and an "each press or repeat
+renews a short hold" scheme would stop after its first window.
 The base mode reads GLFW's own key state of the viewer's window instead (``glfwGetKey``,
 the same GLFW library the viewer runs on) every tick. The window is GLFW's current context
 on the viewer's thread, taken in the first key callback; it is read under the viewer's
@@ -46,22 +47,24 @@ every key when the window loses focus, so a key never sticks down. If the window
 had (another platform or MuJoCo version), each press drives for :data:`HOLD_S` instead.
 
 Driving. The keys down give a body-frame twist; each tick it is rotated by the measured
-heading and integrated into the world pose target ``[x, y, 0, yaw]`` sent as the POI command.
-The base's position servos follow with a lag that grows with speed (about 9 cm at 0.4 m/s,
-0.08 rad at 0.8 rad/s); on release the target stays put and the base settles onto it, which
-is how far it coasts. Shift halves the speeds rather than doubling them: the base saturates
-at 1 m/s and 1.5 rad/s (force caps against joint damping, ``robots/base/robot.xml``), so
-twice 0.8 rad/s could not be followed. The target may lead the measured pose by at most
-:data:`MAX_LEAD_M` and :data:`MAX_LEAD_RAD`, so a base held against a wall (its servos are
-force limited) does not wind up a target it would later run to; once nothing is held and
-the base has stalled short of its target (blocked), the target drops back to the measured
-pose, so it stops pushing. The viewer's camera tracks the base.
+heading and integrated into the world pose target ``[x, y, 0, yaw]`` sent as the POI
+command. The base's position servos follow with a lag that grows with speed (about 9 cm at
+0.4 m/s, 0.08 rad at 0.8 rad/s); on release the target stays put and the base settles onto
+it, which is how far it coasts (from 0.4 m/s: under 5 cm/s after 0.46 s, stopped within
+about 1 s, like a base braking at 0.9 m/s²). Shift halves the speeds rather than doubling
+them: the base saturates at 1 m/s and 1.5 rad/s (force caps against joint damping,
+``robots/base/robot.xml``), so twice 0.8 rad/s could not be followed. The target may lead
+the measured pose by at most :data:`MAX_LEAD_M` and :data:`MAX_LEAD_RAD`, so a base held
+against a wall (its servos are force limited) does not wind up a target it would later run
+to; once nothing is held and the base has stalled short of its target (blocked), the target
+drops back to the measured pose, so it stops pushing. The viewer's camera tracks the base.
 
 The viewer's own shortcuts. MuJoCo's viewer takes every letter key for itself (render and
 visualisation toggles), even with its panels hidden, which is why the base drives with the
 arrows and not W/A/S/D: W toggles wireframe, S shadows, D hides static bodies (the walls).
-The visualisation flags toggled by letters this operator uses (Q, E, X, M) are put back
-every tick; G (the arm's gripper) also toggles the viewer's fog, a render flag out of reach.
+The visualisation flags toggled by the letters this operator uses (Q, E, X, M; for a base
+also A and D) are put back every tick; W and S (and the arm's G, fog) toggle render flags,
+which the passive viewer's handle does not reach.
 """
 
 from __future__ import annotations
@@ -209,6 +212,14 @@ class BaseDriver:
         return tgt.copy()
 
 
+def key_action(key: int, base: bool) -> tuple[str | None, np.ndarray | None]:
+    """What a press does: ``(kind, delta)``, kind one of move, gripper, mark, finish,
+    discard or None. A base's drive keys act while held (:func:`twist`), not per press."""
+    if base:
+        return EVENTS.get(key), None
+    return BINDINGS.get(key, (None, None))
+
+
 def held_from_presses(pressed_at: dict[int, float], t: float) -> set[int]:
     """Without GLFW's key state: the keys pressed less than :data:`HOLD_S` before ``t``."""
     return {k for k, t0 in pressed_at.items() if t - t0 < HOLD_S}
@@ -239,7 +250,7 @@ class KeyboardOperator:
         self.driver = BaseDriver(self.target, sim.control_period) if self.base else None
         self._window = None  # GLFW window of the viewer (first key callback)
         self._pressed_at: dict[int, float] = {}
-        self._t0_wall = time.perf_counter()
+        self._t0_wall: float | None = None  # real time starts at the first tick
         self._t0_sim = sim.t
         try:
             self.viewer = mujoco.viewer.launch_passive(
@@ -258,18 +269,22 @@ class KeyboardOperator:
         # MuJoCo's viewer shows geom groups 0-2; the robot's own geoms sit in their group.
         with self.viewer.lock():
             self.viewer.opt.geomgroup[sim.robot.geom_group] = 1
-            # Visualisation flags the viewer toggles on letters this operator uses.
-            letters = {chr(k) for k in (*BINDINGS, *DRIVE) if 65 <= k <= 90}
+            # Visualisation flags the viewer toggles on letters this operator uses (and, for
+            # a base, on A and D: W/A/S/D come to hand, and D would hide the walls).
+            keys = (*DRIVE, *EVENTS, ord("A"), ord("D")) if self.base else BINDINGS
+            letters = {chr(k) for k in keys if ord("A") <= k <= ord("Z")}
             self._flags = {
                 i: int(self.viewer.opt.flags[i])
                 for i, (_, _, key) in enumerate(mujoco.mjVISSTRING)
                 if key in letters
             }
             if self.base:
+                pose = sim.poi()
                 cam = self.viewer.cam
                 cam.type = mujoco.mjtCamera.mjCAMERA_TRACKING
                 cam.trackbodyid = int(sim.model.site_bodyid[sim.poi_id])
-                cam.distance, cam.elevation, cam.azimuth = 4.0, -40.0, 0.0
+                # From above and behind: over the walls (2 m high), facing the base's +x.
+                cam.distance, cam.elevation, cam.azimuth = 4.0, -70.0, float(np.degrees(pose[3]))
 
     def _on_key(self, key: int) -> None:
         """The viewer's key callback (its thread): queue the press; note the window."""
@@ -278,7 +293,7 @@ class KeyboardOperator:
                 import glfw
 
                 self._window = glfw.get_current_context()
-            except Exception:  # noqa: BLE001 - no key state: presses hold for HOLD_S
+            except Exception:  # no key state: presses hold for HOLD_S
                 self._window = None
         self.keys.put(key)
 
@@ -296,7 +311,7 @@ class KeyboardOperator:
                         return pressed | {
                             k for k in HELD if glfw.get_key(self._window, k) == glfw.PRESS
                         }
-            except Exception:  # noqa: BLE001 - fall back on presses
+            except Exception:  # fall back on presses
                 self._window = None
         return pressed | held_from_presses(self._pressed_at, t)
 
@@ -310,12 +325,9 @@ class KeyboardOperator:
                 key = self.keys.get_nowait()
             except queue.Empty:
                 break
-            if self.base:
-                kind, delta = EVENTS.get(key), None
-                if key in HELD:
-                    pressed.add(key)
-            else:
-                kind, delta = BINDINGS.get(key, (None, None))
+            kind, delta = key_action(key, self.base)
+            if self.base and key in HELD:
+                pressed.add(key)
             if kind == "move" and delta is not None:
                 self.target = self.target + delta
             elif kind == "gripper":
@@ -330,6 +342,10 @@ class KeyboardOperator:
             self.target = self.driver.update(self._held(pressed), self.sim.poi())
         if not self.viewer.is_running():
             done = True
+        if self._t0_wall is None:
+            # Not at construction: opening the viewer and the recorder's first camera frame
+            # take seconds, which the simulation would then race through to catch up.
+            self._t0_wall, self._t0_sim = time.perf_counter(), self.sim.t
         if self.realtime:
             ahead = (self.sim.t - self._t0_sim) - (time.perf_counter() - self._t0_wall)
             if ahead > 0:

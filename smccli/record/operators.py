@@ -369,7 +369,11 @@ def script_layout(scene: Scene, script: Script, rng: np.random.Generator | None 
     variant = script.variant
     if variant is None and scene.variants:
         variant = scene.variants[0][0]
-    layout = nominal_layout(scene, variant) if rng is None else sample_layout(scene, rng, variant=variant)
+    layout = (
+        nominal_layout(scene, variant)
+        if rng is None
+        else sample_layout(scene, rng, variant=variant)
+    )
     if script.start is not None:
         if scene.robot.base is None:
             raise ScriptError(

@@ -519,7 +519,6 @@ class Sim:
             reasons.append(f"{crit.task}: " + "; ".join(w for _, w in held))
         return Success(False, " | ".join(reasons))
 
-
     def shows(self, variant: str) -> bool:
         """Whether the layout shows every object of ``variant``."""
         return set(dict(self.scene.variants)[variant]) <= set(self.present)
