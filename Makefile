@@ -65,6 +65,7 @@ bench: setup
 	$(PY) -m smccli.bench.record
 	$(PY) -m smccli.bench.compile
 	$(PY) -m smccli.bench.paper
+	$(PY) -m smccli.bench.rooms
 
 lint: setup
 	$(VENV)/bin/ruff check smccli tests

@@ -396,7 +396,7 @@ class TreeExecutor:
             if stored.scan is not None:
                 t2 = time.perf_counter()
                 try:
-                    al = align_scans(stored.scan, scan, self.params.scan) if scan else None
+                    al = align_scans(stored.scan, scan, self.params.scan)
                 except ValueError:  # too few returns (a blind lidar) to align
                     al = None
                 icp_s += time.perf_counter() - t2
@@ -440,6 +440,7 @@ class TreeExecutor:
         if action.goal_frame == "scan":
             # G_now = L_now * T^-1 * G_rel, T = the current lidar in the demo lidar's frame,
             # from the alignment that matched the scan (decide_base).
+            assert edge is not None, "a scan-frame goal is mapped for the edge that matched"
             T = self._scan_alignment[edge]
             lidar_now = self.sensors.lidar_pose()
             x, y, yaw = map_goal(action.goal[[0, 1, 3]], T, lidar_now)

@@ -11,6 +11,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from smccli.errors import SmcError
 from smccli.perception.scan import Scan2D
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
 from smccli.world.sim import Sim
@@ -67,17 +68,20 @@ class Sensors:
         """Scale reading [kg]; None without a scale."""
         return self._sim.weight()
 
-    def lidar(self) -> Scan2D | None:
-        """A scan of the robot's lidar, in its own frame, None without a lidar. (The
-        simulator's reading also carries the true pose; control gets :meth:`lidar_pose`.)"""
+    def lidar(self) -> Scan2D:
+        """A scan of the robot's lidar, in its own frame (:attr:`has_lidar`). The simulator's
+        reading also carries the true pose; control gets :meth:`lidar_pose` instead."""
         r = self._sim.lidar()
         if r is None:
-            return None
+            raise SmcError(f"robot {self.robot.name!r} has no lidar")
         return Scan2D(r.ranges, r.angle_min, r.angle_increment, r.range_max)
 
-    def lidar_pose(self) -> np.ndarray | None:
+    def lidar_pose(self) -> np.ndarray:
         """The lidar's pose ``[x, y, yaw]`` from odometry and its mounting [m, m, rad]."""
-        return self._sim.lidar_pose()
+        pose = self._sim.lidar_pose()
+        if pose is None:
+            raise SmcError(f"robot {self.robot.name!r} has no lidar")
+        return pose
 
     def render_camera(self) -> CameraFrame:
         return self._sim.render_camera()

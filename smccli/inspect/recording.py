@@ -15,7 +15,30 @@ holds the tree (static) and the log on the timeline ``time`` (simulation seconds
   the mapped goal and the planned path; ``/world/perception/points``: recorded clouds.
 - ``/signals/...``: weight, gripper command, POI coordinates and speed, replay distances.
 - ``/events/saliency`` (one TextLog per saliency mark), ``/events/fragments``,
-  ``/events/decisions`` (one per ``/smc/decision`` record).
+  ``/events/decisions`` (one per ``/smc/decision`` record), ``/events/perception``.
+
+A mobile base (a tree with room / scan perceptions, or a log with ``/lidar/scan``) adds:
+
+- ``/world/rooms``: the scene's regions as closed line strips on the floor, labelled with
+  their names, and ``/world/places`` its named places as arrows (static, if it has any).
+- ``/world/actions/<edge>/scan``: the SMC's stored scan drawn in the world at its
+  ``scan_pose``, ``.../scan_pose`` that pose and ``.../goal_pose`` the goal in the world
+  (a scan-frame goal composed with ``scan_pose``), as arrows; ``/tree/labels`` say "room
+  mostly <colour>, scan at (x, y)" and take the room histogram's dominant colour.
+- ``/world/lidar/scan``: each scan's returns in the world (placed by the lidar's odometry
+  pose: the POI composed with the lidar's mounting; scans thinned in time to at most
+  ``MAX_SCAN_POINTS`` points), ``/world/lidar/pose`` the lidar's pose as an arrow.
+- ``/world/base``: the base's footprint as a box, ``/world/base/heading`` its heading
+  (the path taken is ``/world/poi/path``, on the floor).
+- ``/signals/room_histogram/camera``: the camera's whole-frame colour histogram at each
+  decision point (BarChart), ``/signals/room_histogram/smc`` the histogram stored in the
+  SMC chosen there (replay) or compiled from there (demonstration).
+- ``/signals/decision/<term>/<edge>``: a replay's D_P terms per candidate (``room``,
+  ``scan``, ``icp_fitness``), also in ``/events/decisions``; ``/world/decisions/goal`` the
+  mapped goal as a point and an arrow, ``/world/decisions/lidar`` the lidar's pose there.
+
+A base's decision points show their room histogram instead of the camera's point cloud and
+object clusters (``/world/decisions/cloud``, ``clusters`` and ``salient`` are left out).
 
 Rerun is imported only here. ``--serve`` runs the ``rerun`` binary shipped with
 rerun-sdk (the Python API binds every interface; the binary takes ``--bind``).
@@ -49,6 +72,9 @@ APP_ID = "smc"
 TIMELINE = "time"
 MAX_CLOUD_POINTS = 40_000
 """Point clouds are subsampled to at most this many points (viewer and file size)."""
+MAX_SCAN_POINTS = 100_000
+"""A log's lidar scans are thinned in time to at most this many returns in all (every
+scan of a 26 s log at 10 Hz, 360 beams, fits)."""
 
 _PALETTE = [
     (31, 119, 180),
@@ -150,9 +176,10 @@ def _recording_plan(tree: Tree, logs: Sequence[Any], tree_name: str) -> list[tup
 
 
 def _fill(rec: Any, tree: Tree, log: Any, warn: Callable[[str], None]) -> None:
-    log_tree(rec, tree)
+    mobile = mobile_view(tree, log, warn)
+    log_tree(rec, tree, mobile=mobile)
     if log is not None:
-        log_log(rec, log, tree, warn=warn)
+        log_log(rec, log, tree, warn=warn, mobile=mobile)
 
 
 def write_rrd(
@@ -168,7 +195,7 @@ def write_rrd(
 
     out = check_output(out, force=True)  # overwriting was the caller's decision
     plan = _recording_plan(tree, logs, tree_name)
-    bp = blueprint()
+    bp = blueprint(mobile=_is_mobile(tree, logs))
     with tempfile.TemporaryDirectory(prefix="smc-rrd-", dir=out.parent) as tmp:
         parts = []
         for k, (rid, log) in enumerate(plan):
@@ -209,7 +236,7 @@ def spawn_viewer(
     import rerun as rr
 
     plan = _recording_plan(tree, logs, tree_name)
-    bp = blueprint()
+    bp = blueprint(mobile=_is_mobile(tree, logs))
     for rid, log in plan:
         rec = rr.RecordingStream(APP_ID, recording_id=rid)
         try:
@@ -353,10 +380,17 @@ def serve_rrd(
 # --- blueprint ------------------------------------------------------------------------
 
 
-def blueprint() -> Any:
-    """Graph and time series on the left, 3D world, camera, depth and events on the right."""
+def blueprint(*, mobile: bool = False) -> Any:
+    """Graph and time series on the left, 3D world, camera, depth and events on the right;
+    ``mobile``: a tab with the room histograms next to the events."""
     import rerun.blueprint as rrb
 
+    tabs = [
+        rrb.TextLogView(origin="/events", name="events"),
+        rrb.TextDocumentView(origin="/tree/smcs", name="SMCs"),
+    ]
+    if mobile:
+        tabs.append(rrb.BarChartView(origin="/signals/room_histogram", name="room histogram"))
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
@@ -373,10 +407,7 @@ def blueprint() -> Any:
                     rrb.Spatial2DView(
                         origin="/world/camera", contents="$origin/depth", name="depth"
                     ),
-                    rrb.Tabs(
-                        rrb.TextLogView(origin="/events", name="events"),
-                        rrb.TextDocumentView(origin="/tree/smcs", name="SMCs"),
-                    ),
+                    rrb.Tabs(*tabs),
                 ),
                 row_shares=[3, 2],
             ),
@@ -399,6 +430,12 @@ def _cluster_name(cluster: Any, tree: Tree) -> str:
     return colour_name(_cluster_rgb(cluster, tree))
 
 
+def _hist_rgb(histogram: Any, tree: Tree) -> tuple[int, int, int]:
+    """Dominant colour of a colour histogram (a room's, binned as the clusters')."""
+    p = tree.params.perception
+    return dominant_rgb(np.asarray(histogram), p.hue_bins, p.sat_bins, p.val_bins)
+
+
 def _sources_text(edge: Edge, limit: int = 3) -> str:
     parts = [f"{s.log} {s.t0:.1f}-{s.t1:.1f} s" for s in edge.sources[:limit]]
     if len(edge.sources) > limit:
@@ -416,6 +453,13 @@ def perception_text(edge: Edge, tree: Tree) -> str:
     w = edge.smc.perception.weight
     if w is not None:
         parts.append(f"weight {1000 * w:.0f} g")
+    p = edge.smc.perception
+    if p.room is not None:
+        parts.append(f"room mostly {colour_name(_hist_rgb(p.room, tree))}")
+    if p.scan is not None and p.scan_pose is not None:
+        parts.append(f"scan at ({p.scan_pose[0]:.2f}, {p.scan_pose[1]:.2f})")
+    elif p.room is not None:
+        parts.append("no salient scan")
     return ", ".join(parts) or "no salient object"
 
 
@@ -472,6 +516,355 @@ def _layout(tree: Tree) -> dict[str, tuple[float, float]]:
     return pos
 
 
+# --- a mobile base ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class MobileView:
+    """What drawing a mobile base takes from its scene (defaults when it is unknown)."""
+
+    regions: tuple[tuple[str, tuple[tuple[float, float, float, float], ...]], ...] = ()
+    """The scene's rooms, each a union of rectangles (x_min, x_max, y_min, y_max) [m]."""
+    places: tuple[tuple[str, tuple[float, float, float]], ...] = ()
+    """The scene's named base poses (x, y, yaw) [m, m, rad]."""
+    mount: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """The lidar's planar pose in the POI's frame ``[x, y, yaw]`` [m, m, rad]."""
+    lidar_z: float = 0.0
+    """Height of the lidar's scan plane [m]: scans are drawn there."""
+    footprint: tuple[float, float, float, float] | None = None
+    """The robot's outline in the POI's frame (x_min, x_max, y_min, y_max) [m], if known."""
+
+
+_ARROW = 0.35
+"""Length of a pose arrow [m]."""
+_SCAN_RGB = (230, 70, 50)
+_TERMS = ("room", "scan", "icp_fitness")
+"""A base's D_P terms in a decision record, in the order they are shown."""
+
+
+def _tree_is_mobile(tree: Tree) -> bool:
+    return any(
+        e.smc.perception.room is not None
+        or e.smc.perception.scan is not None
+        or e.smc.action.goal_frame == "scan"
+        for e in tree.edges
+    )
+
+
+def _is_mobile(tree: Tree, logs: Sequence[Any]) -> bool:
+    """Whether the tree or a log is a mobile base's (room / scan perceptions, lidar scans)."""
+    return _tree_is_mobile(tree) or any(getattr(log, "scans", None) for log in logs)
+
+
+def _scene_geometry(scene: Any) -> MobileView:
+    """Rooms, places, lidar mounting and footprint of a scene's robot, from its model at its
+    reference configuration."""
+    import mujoco
+
+    from smccli.world.lidar import lidar_mount
+
+    model = scene.model()
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    robot = scene.robot
+    lidar = next((m for m in robot.sensors if m.type == "lidar"), None)
+    mount, lidar_z = np.zeros(3), 0.0
+    if lidar is not None:
+        mount = lidar_mount(model, robot.poi, lidar.target)
+        sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, lidar.target)
+        lidar_z = float(data.site_xpos[sid][2])
+    footprint = None
+    pid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, robot.poi)
+    own = np.flatnonzero(model.geom_group == robot.geom_group)
+    if pid >= 0 and len(own):
+        R = data.site_xmat[pid].reshape(3, 3)
+        yaw = math.atan2(R[1, 0], R[0, 0])
+        signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)])
+        corners = []
+        for g in own:
+            centre, half = model.geom_aabb[g, :3], model.geom_aabb[g, 3:]
+            local = centre + signs * half
+            corners.append(local @ data.geom_xmat[g].reshape(3, 3).T + data.geom_xpos[g])
+        xy = np.concatenate(corners)[:, :2] - data.site_xpos[pid][:2]
+        c, s = math.cos(yaw), math.sin(yaw)
+        xy = xy @ np.array([[c, -s], [s, c]])  # into the POI's frame
+        if np.all(np.isfinite(xy)):
+            lo, hi = xy.min(axis=0), xy.max(axis=0)
+            footprint = (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
+    return MobileView(scene.regions, scene.places, mount, lidar_z, footprint)
+
+
+def mobile_view(
+    tree: Tree, log: Any | None, warn: Callable[[str], None] = lambda m: None
+) -> MobileView | None:
+    """How to draw a mobile base, or None for an arm (tree and log without room / scan
+    perceptions and lidar scans). The scene is the log's (its attachments), else the
+    tree's built-in scene by name; without one, the lidar sits on the POI at z = 0."""
+    if not (_tree_is_mobile(tree) or (log is not None and log.scans)):
+        return None
+    from smccli.world.scene import builtin_names, load_scene, scene_of_log
+
+    name = str(tree.scene.get("name", ""))
+    try:
+        if log is not None:
+            scene = scene_of_log(log.attachments, log.path)
+        elif name in builtin_names():
+            scene = load_scene(name)
+            digest = tree.scene.get("digest")
+            if digest and digest != scene.digest:
+                warn(
+                    f"scene {name} changed since the tree was compiled; rooms drawn from "
+                    "the current scene file"
+                )
+        else:
+            warn(f"scene {name or '?'} is not built in: rooms and the robot's footprint not drawn")
+            return MobileView()
+        return _scene_geometry(scene)
+    except (SmcError, ValueError) as exc:
+        where = Path(log.path).name if log is not None else f"scene {name}"
+        warn(
+            f"{where}: no scene to draw the rooms and place the lidar "
+            f"({str(exc).splitlines()[0]}); the lidar is drawn at the POI"
+        )
+        return MobileView()
+
+
+def _pose_arrows(poses: np.ndarray, z: float, length: float = _ARROW) -> dict[str, Any]:
+    """Arrows3D's ``origins`` and ``vectors`` for planar poses ``[x, y, yaw]``, each of
+    shape (N, 3): at height ``z``, ``length`` long along the yaw."""
+    poses = np.atleast_2d(np.asarray(poses, dtype=float))
+    origins = np.column_stack([poses[:, 0], poses[:, 1], np.full(len(poses), z)])
+    vectors = np.column_stack(
+        [length * np.cos(poses[:, 2]), length * np.sin(poses[:, 2]), np.zeros(len(poses))]
+    )
+    return {"origins": origins, "vectors": vectors}
+
+
+def _in_world(points: np.ndarray, pose: np.ndarray, z: float) -> np.ndarray:
+    """2-D points in a frame at planar ``pose`` -> (N, 3) world points at height ``z``."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    xy = points @ np.array([[c, s], [-s, c]]) + np.asarray(pose[:2])
+    return np.column_stack([xy, np.full(len(xy), z)])
+
+
+def _goal_pose_world(edge: Edge) -> np.ndarray | None:
+    """A base SMC's goal in the world ``[x, y, yaw]``: a scan-frame goal composed with its
+    scan pose; a world goal as it is; None for an object-frame goal."""
+    from smccli.perception.scan import pose_compose
+
+    a, p = edge.smc.action, edge.smc.perception
+    g = np.asarray(a.goal, dtype=float)
+    if a.goal_frame == "scan" and p.scan_pose is not None and len(g) == 4:
+        return pose_compose(np.asarray(p.scan_pose, dtype=float), g[[0, 1, 3]])
+    if a.goal_frame == "world" and len(g) == 4:
+        return g[[0, 1, 3]]
+    return None
+
+
+def _log_stored_scan(
+    rec: Any, edge: Edge, colour: tuple[int, int, int], mobile: MobileView
+) -> None:
+    """An SMC's stored scan in the world at its scan pose, that pose and its goal (static)."""
+    import rerun as rr
+
+    base = f"/world/actions/{edge.id}"
+    p = edge.smc.perception
+    if p.scan is not None and p.scan_pose is not None:
+        pose = np.asarray(p.scan_pose, dtype=float)
+        pts = _in_world(p.scan.points(), pose, mobile.lidar_z)
+        rec.log(
+            f"{base}/scan",
+            rr.Points3D(pts, colors=[colour], radii=0.012, labels=[f"{edge.id} scan"]),
+            static=True,
+        )
+        rec.log(
+            f"{base}/scan_pose",
+            rr.Arrows3D(
+                **_pose_arrows(pose, mobile.lidar_z),
+                colors=[colour],
+                radii=0.015,
+                labels=[f"{edge.id} scan taken here"],
+            ),
+            static=True,
+        )
+    goal = _goal_pose_world(edge)
+    if goal is not None:
+        rec.log(
+            f"{base}/goal_pose",
+            rr.Arrows3D(
+                **_pose_arrows(goal, 0.02),
+                colors=[colour],
+                radii=0.025,
+                labels=[f"{edge.id} goal ({edge.smc.action.goal_frame} frame)"],
+            ),
+            static=True,
+        )
+
+
+def _log_rooms(rec: Any, mobile: MobileView) -> None:
+    """The scene's rooms as closed outlines on the floor and its places as arrows (static)."""
+    import rerun as rr
+
+    strips, colours, labels = [], [], []
+    for k, (name, rects) in enumerate(mobile.regions):
+        for x0, x1, y0, y1 in rects:
+            strips.append([(x0, y0, 0.0), (x1, y0, 0.0), (x1, y1, 0.0), (x0, y1, 0.0)])
+            strips[-1].append(strips[-1][0])  # closed
+            colours.append(_PALETTE[k % len(_PALETTE)])
+            labels.append(name)
+    if strips:
+        rec.log(
+            "/world/rooms",
+            rr.LineStrips3D(strips, colors=colours, radii=0.02, labels=labels),
+            static=True,
+        )
+    if mobile.places:
+        poses = np.array([p for _, p in mobile.places], dtype=float)
+        rec.log(
+            "/world/places",
+            rr.Arrows3D(
+                **_pose_arrows(poses, 0.01, 0.25),
+                colors=[(150, 150, 150)],
+                radii=0.01,
+                labels=[n for n, _ in mobile.places],
+            ),
+            static=True,
+        )
+
+
+def _lidar_poses(log: Any, times: np.ndarray, mobile: MobileView) -> np.ndarray:
+    """The lidar's planar poses ``[x, y, yaw]`` at ``times``: the POI (odometry)
+    interpolated there, composed with the lidar's mounting; shape (N, 3)."""
+    from smccli.perception.scan import pose_compose
+
+    poi = np.column_stack([np.interp(times, log.poi_t, log.poi[:, i]) for i in (0, 1, 3)])
+    return np.array([pose_compose(p, mobile.mount) for p in poi]).reshape(-1, 3)
+
+
+def _log_base(rec: Any, log: Any, mobile: MobileView) -> None:
+    """The base's footprint and heading over time (from the POI, i.e. odometry)."""
+    import rerun as rr
+
+    n = len(log.poi_t)
+    yaw = log.poi[:, 3]
+    times = [rr.TimeColumn(TIMELINE, duration=log.poi_t)]
+    if mobile.footprint is not None:
+        x0, x1, y0, y1 = mobile.footprint
+        cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+        c, s = np.cos(yaw), np.sin(yaw)
+        centres = np.column_stack(
+            [log.poi[:, 0] + c * cx - s * cy, log.poi[:, 1] + s * cx + c * cy, np.full(n, 0.03)]
+        )
+        quats = np.column_stack([np.zeros(n), np.zeros(n), np.sin(yaw / 2), np.cos(yaw / 2)])
+        rec.send_columns(
+            "/world/base",
+            indexes=times,
+            columns=rr.Boxes3D.columns(
+                centers=centres,
+                half_sizes=np.tile([(x1 - x0) / 2, (y1 - y0) / 2, 0.03], (n, 1)),
+                quaternions=quats,
+                colors=np.tile(_HIGHLIGHT, (n, 1)),
+                radii=np.full(n, 0.008),
+            ),
+        )
+    arrows = _pose_arrows(log.poi[:, [0, 1, 3]], 0.07)
+    rec.send_columns(
+        "/world/base/heading",
+        indexes=times,
+        columns=rr.Arrows3D.columns(
+            **arrows, colors=np.tile(_HIGHLIGHT, (n, 1)), radii=np.full(n, 0.02)
+        ),
+    )
+
+
+def _log_scans(rec: Any, log: Any, mobile: MobileView) -> None:
+    """The lidar's returns in the world at each scan (thinned in time to at most
+    ``MAX_SCAN_POINTS`` in all) and the lidar's pose at every scan."""
+    import rerun as rr
+
+    from smccli.perception.scan import Scan2D
+    from smccli.world.lidar import RANGE_MAX
+
+    if not log.scans or not len(log.poi_t):
+        return
+    t = np.array([sc.t for sc in log.scans])
+    poses = _lidar_poses(log, t, mobile)
+    rec.send_columns(
+        "/world/lidar/pose",
+        indexes=[rr.TimeColumn(TIMELINE, duration=t)],
+        columns=rr.Arrows3D.columns(
+            **_pose_arrows(poses, mobile.lidar_z, 0.25),
+            colors=np.tile(_SCAN_RGB, (len(t), 1)),
+            radii=np.full(len(t), 0.015),
+        ),
+    )
+    scans = [
+        Scan2D.from_span(sc.ranges, sc.start_angle, sc.end_angle, RANGE_MAX).points()
+        for sc in log.scans
+    ]
+    total = sum(len(p) for p in scans)
+    stride = max(1, math.ceil(total / MAX_SCAN_POINTS))
+    keep = range(0, len(scans), stride)
+    world = [_in_world(scans[i], poses[i], mobile.lidar_z) for i in keep]
+    lengths = [len(w) for w in world]
+    pts = np.concatenate(world) if world else np.zeros((0, 3))
+    rec.send_columns(
+        "/world/lidar/scan",
+        indexes=[rr.TimeColumn(TIMELINE, duration=t[list(keep)])],
+        columns=rr.Points3D.columns(
+            positions=pts,
+            colors=np.tile(_SCAN_RGB, (len(pts), 1)),
+            radii=np.full(len(pts), 0.015),
+        ).partition(lengths),
+    )
+
+
+def _log_room_histograms(
+    rec: Any, log: Any, tree: Tree, points: Sequence[tuple[float, float, str]]
+) -> None:
+    """At each decision point: the camera's whole-frame colour histogram, the one stored in
+    the SMC chosen there (replay) or compiled from there (demonstration), and a line."""
+    import rerun as rr
+
+    from smccli.perception.room import d_room, room_histogram
+
+    if not log.frames:
+        return
+    pp = tree.params.perception
+    edges = {e.id: e for e in tree.edges}
+    for k, (t0, _t1, label) in enumerate(points):
+        frame = _frame_at(log.frames, t0)
+        hist = room_histogram(frame.rgb, pp)
+        rgb = _hist_rgb(hist, tree)
+        edge = None
+        if log.decisions:
+            if k < len(log.decisions):
+                edge = edges.get(str(log.decisions[k].get("chosen")))
+        else:
+            edge = next(
+                (
+                    e
+                    for e in tree.edges
+                    if any(s.sha256 == log.sha256 and abs(s.t0 - t0) < 0.05 for s in e.sources)
+                ),
+                None,
+            )
+        rec.set_time(TIMELINE, duration=t0)
+        rec.log("/signals/room_histogram/camera", rr.BarChart(hist, color=rgb))
+        text = f"{label}: room mostly {colour_name(rgb)} (camera at t={frame.t:.2f} s)"
+        if edge is None or edge.smc.perception.room is None:
+            rec.log("/signals/room_histogram/smc", rr.Clear(recursive=False))
+        else:
+            stored = edge.smc.perception.room
+            srgb = _hist_rgb(stored, tree)
+            rec.log("/signals/room_histogram/smc", rr.BarChart(np.asarray(stored), color=srgb))
+            text += (
+                f"; {edge.id} stored a room mostly {colour_name(srgb)}, "
+                f"d_room {d_room(hist, np.asarray(stored), pp):.3f}"
+            )
+        rec.log("/events/perception", rr.TextLog(text, level="DEBUG"))
+
+
 # --- the tree ---------------------------------------------------------------------------
 
 
@@ -495,8 +888,9 @@ def _boxes(
     )
 
 
-def log_tree(rec: Any, tree: Tree) -> None:
-    """The tree (static): graph at ``/tree``, actions under ``/world/actions``."""
+def log_tree(rec: Any, tree: Tree, *, mobile: MobileView | None = None) -> None:
+    """The tree (static): graph at ``/tree``, actions under ``/world/actions``; for a mobile
+    base (``mobile``, see :func:`mobile_view`) also the stored scans, goals and rooms."""
     import rerun as rr
 
     from smccli.learn.dmp import rollout
@@ -528,6 +922,8 @@ def log_tree(rec: Any, tree: Tree) -> None:
             (
                 _cluster_rgb(e.smc.perception.cluster, tree)
                 if e.smc.perception.cluster is not None
+                else _hist_rgb(e.smc.perception.room, tree)
+                if e.smc.perception.room is not None
                 else colours[e.id]
             )
             for e in tree.edges
@@ -553,10 +949,16 @@ def log_tree(rec: Any, tree: Tree) -> None:
     ]
     for e in tree.edges:
         g = e.smc.action.goal
+        goal = f"({g[0]:+.3f}, {g[1]:+.3f}, {g[2]:+.3f}) {e.smc.action.goal_frame}"
+        world = _goal_pose_world(e)
+        if e.smc.action.goal_frame == "scan" and world is not None:
+            goal = (
+                f"({g[0]:+.3f}, {g[1]:+.3f}, {math.degrees(g[3]):+.0f}°) scan → world "
+                f"({world[0]:+.2f}, {world[1]:+.2f}, {math.degrees(world[2]):+.0f}°)"
+            )
         rows.append(
             f"| {e.id} | {e.parent} → {e.child} | {perception_text(e, tree)} | "
-            f"{e.smc.action.event} | ({g[0]:+.3f}, {g[1]:+.3f}, {g[2]:+.3f}) "
-            f"{e.smc.action.goal_frame} | {e.support} | {_sources_text(e, 10)} |"
+            f"{e.smc.action.event} | {goal} | {e.support} | {_sources_text(e, 10)} |"
         )
     scene = tree.scene.get("name", "?")
     head = (
@@ -577,11 +979,13 @@ def log_tree(rec: Any, tree: Tree) -> None:
             rr.LineStrips3D(
                 [y[:, :3]],
                 colors=[colours[e.id]],
-                radii=0.003,
+                radii=0.003 if mobile is None else 0.01,
                 labels=[f"{e.id} ({e.smc.action.event})"],
             ),
             static=True,
         )
+        if mobile is not None:
+            _log_stored_scan(rec, e, colours[e.id], mobile)
         rec.log(
             f"{base}/goal",
             rr.Points3D([dmp.goal[:3]], colors=[colours[e.id]], radii=0.008),
@@ -594,6 +998,8 @@ def log_tree(rec: Any, tree: Tree) -> None:
                 _boxes([c], [_cluster_rgb(c, tree)], [f"{e.id}: {_cluster_name(c, tree)}"], 0.001),
                 static=True,
             )
+    if mobile is not None:
+        _log_rooms(rec, mobile)
 
 
 # --- a log --------------------------------------------------------------------------------
@@ -645,10 +1051,16 @@ def log_log(
     *,
     warn: Callable[[str], None] = lambda m: None,
     perception: bool = True,
+    mobile: MobileView | None = None,
 ) -> None:
-    """A demonstration or replay log on the ``time`` timeline (see the module docstring)."""
+    """A demonstration or replay log on the ``time`` timeline (see the module docstring).
+
+    ``mobile``: how to draw a mobile base (default: :func:`mobile_view` of tree and log).
+    """
     import rerun as rr
 
+    if mobile is None:
+        mobile = mobile_view(tree, log, warn)
     name = Path(log.path).name
     tcol = rr.TimeColumn
     # POI: path taken (static), moving point and coordinates over time.
@@ -658,7 +1070,7 @@ def log_log(
             rr.LineStrips3D(
                 [log.poi[:, :3]],
                 colors=[(240, 240, 240)],
-                radii=0.002,
+                radii=0.002 if mobile is None else 0.01,
                 labels=[f"{name}: path taken"],
             ),
             static=True,
@@ -701,6 +1113,10 @@ def log_log(
             columns=rr.Scalars.columns(scalars=[c.gripper for c in log.commands]),
         )
     _log_camera(rec, log)
+    if mobile is not None:
+        if len(log.poi_t):
+            _log_base(rec, log, mobile)
+        _log_scans(rec, log, mobile)
     for pc in log.point_clouds:
         rec.set_time(TIMELINE, duration=pc.t)
         pts, cols = _subsample(np.asarray(pc.points), pc.colors)
@@ -719,8 +1135,10 @@ def log_log(
         for t0, t1, label in points:
             rec.set_time(TIMELINE, duration=t0)
             rec.log("/events/fragments", rr.TextLog(f"{label}: {t0:.2f}-{t1:.2f} s", level="DEBUG"))
-    _log_decisions(rec, log, tree, warn)
-    if perception:
+    _log_decisions(rec, log, tree, warn, mobile)
+    if mobile is not None:
+        _log_room_histograms(rec, log, tree, points)
+    elif perception:
         _log_perception(rec, log, tree, points, warn)
 
 
@@ -768,8 +1186,15 @@ def _log_camera(rec: Any, log: Any) -> None:
         rec.log("/world/camera/depth", rr.DepthImage(mm, meter=1000.0, colormap="turbo"))
 
 
-def _log_decisions(rec: Any, log: Any, tree: Tree, warn: Callable[[str], None]) -> None:
-    """Replay decisions: a TextLog each, distances as scalars, mapped goal and planned path."""
+def _log_decisions(
+    rec: Any,
+    log: Any,
+    tree: Tree,
+    warn: Callable[[str], None],
+    mobile: MobileView | None = None,
+) -> None:
+    """Replay decisions: a TextLog each, distances (and a base's D_P terms) as scalars,
+    mapped goal (a base's also as an arrow, with the lidar's pose) and planned path."""
     import rerun as rr
 
     from smccli.learn.dmp import rollout
@@ -784,17 +1209,34 @@ def _log_decisions(rec: Any, log: Any, tree: Tree, warn: Callable[[str], None]) 
         parts = []
         for c in cands:
             dp = c.get("d_p")
+            raw = c.get("terms") or {}
+            order = [k for k in _TERMS if k in raw] + sorted(k for k in raw if k not in _TERMS)
+            terms = {k: raw[k] for k in order if raw[k] is not None}
             parts.append(
                 f"{c.get('edge')} d_p={'-' if dp is None else f'{dp:.3f}'}"
-                f"{' contingent' if c.get('contingent') else ''}"
+                + (f" ({', '.join(f'{k} {v:.3f}' for k, v in terms.items())})" if terms else "")
+                + f"{' contingent' if c.get('contingent') else ''}"
             )
             if dp is not None:
                 rec.log(f"/signals/decision/d_p/{c.get('edge')}", rr.Scalars(float(dp)))
+            for k, v in terms.items():
+                rec.log(f"/signals/decision/{k}/{c.get('edge')}", rr.Scalars(float(v)))
         chosen = d.get("chosen")
         text = f"node {d.get('node')}: chose {chosen if chosen is not None else 'none'} | " + (
             "; ".join(parts) or "no candidates"
         )
         rec.log("/events/decisions", rr.TextLog(text, level="INFO" if chosen else "WARN"))
+        lidar = d.get("lidar_pose")
+        if mobile is not None and lidar is not None:
+            rec.log(
+                "/world/decisions/lidar",
+                rr.Arrows3D(
+                    **_pose_arrows(np.asarray(lidar, dtype=float), mobile.lidar_z),
+                    colors=[_SCAN_RGB],
+                    radii=0.02,
+                    labels=[f"lidar at {d.get('node')}"],
+                ),
+            )
         goal = d.get("mapped_goal")
         if chosen is None or goal is None:
             rec.log("/world/decisions/goal", rr.Clear(recursive=False))
@@ -802,10 +1244,17 @@ def _log_decisions(rec: Any, log: Any, tree: Tree, warn: Callable[[str], None]) 
             continue
         colour = colours.get(str(chosen), _HIGHLIGHT)
         goal = np.asarray(goal, dtype=float)
-        rec.log(
-            "/world/decisions/goal",
-            rr.Points3D([goal[:3]], colors=[colour], radii=0.012, labels=[f"goal of {chosen}"]),
+        point = rr.Points3D(
+            [goal[:3]],
+            colors=[colour],
+            radii=0.012 if mobile is None else 0.04,
+            labels=[f"goal of {chosen}"],
         )
+        if mobile is not None and len(goal) == 4:
+            arrow = rr.Arrows3D(**_pose_arrows(goal[[0, 1, 3]], 0.02), colors=[colour], radii=0.03)
+            rec.log("/world/decisions/goal", point, arrow)
+        else:
+            rec.log("/world/decisions/goal", point)
         edge = edges.get(str(chosen))
         start = _poi_at(log, t)
         if edge is None:
@@ -821,7 +1270,12 @@ def _log_decisions(rec: Any, log: Any, tree: Tree, warn: Callable[[str], None]) 
         )
         rec.log(
             "/world/decisions/planned",
-            rr.LineStrips3D([y[:, :3]], colors=[colour], radii=0.004, labels=[f"{chosen} planned"]),
+            rr.LineStrips3D(
+                [y[:, :3]],
+                colors=[colour],
+                radii=0.004 if mobile is None else 0.012,
+                labels=[f"{chosen} planned"],
+            ),
         )
 
 

@@ -74,6 +74,7 @@ import queue
 import threading
 import time
 from collections.abc import Callable, Iterable
+from typing import Any
 
 import numpy as np
 
@@ -248,7 +249,7 @@ class KeyboardOperator:
         self.base = sim.robot.base is not None and not sim.robot.arm_joints
         """True for a mobile base: hold keys to drive (else: an arm, a step per press)."""
         self.driver = BaseDriver(self.target, sim.control_period) if self.base else None
-        self._window = None  # GLFW window of the viewer (first key callback)
+        self._window: Any = None  # GLFW window of the viewer (first key callback)
         self._pressed_at: dict[int, float] = {}
         self._t0_wall: float | None = None  # real time starts at the first tick
         self._t0_sim = sim.t

@@ -597,16 +597,19 @@ def _places(raw: Mapping[str, Any]) -> tuple[tuple[str, tuple[float, float, floa
 def _regions(
     raw: Mapping[str, Any], where: str, yaml_text: str
 ) -> tuple[tuple[str, tuple[tuple[float, float, float, float], ...]], ...]:
-    out = []
+    out: list[tuple[str, tuple[tuple[float, float, float, float], ...]]] = []
     for name, rects in (raw.get("regions") or {}).items():
-        for j, (x0, x1, y0, y1) in enumerate(rects):
+        boxes = []
+        for j, r in enumerate(rects):
+            x0, x1, y0, y1 = (float(v) for v in r)
             if x0 >= x1 or y0 >= y1:
                 raise SceneError(
                     f"{_at(yaml_text, where, ('regions', name, j))}: expected "
                     "[x_min, x_max, y_min, y_max] with min < max"
                 )
-        out.append((str(name), tuple(tuple(float(v) for v in r) for r in rects)))
-    return tuple(out)  # type: ignore[return-value]
+            boxes.append((x0, x1, y0, y1))
+        out.append((str(name), tuple(boxes)))
+    return tuple(out)
 
 
 def _start(raw: Mapping[str, Any], where: str, yaml_text: str, robot: Robot) -> StartSpec | None:
