@@ -17,6 +17,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from rerun.chunk import RrdReader  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
+from test_inspect import read_rrd  # noqa: E402
 
 from smccli.inspect.recording import inspect  # noqa: E402
 from smccli.learn.tree import Tree, load_tree  # noqa: E402
@@ -47,26 +48,6 @@ class Inspected:
     warnings: tuple[str, ...]
     blueprint_views: set[tuple[str, str]]
     """(view class, origin) of the blueprint's views."""
-
-
-def read_rrd(path: Path) -> dict[str, dict[str, dict]]:
-    """recording id -> entity path -> {"archetypes", "rows", "columns": {name: [rows]}}."""
-    reader = RrdReader(path)
-    out: dict[str, dict[str, dict]] = {}
-    for store in reader.recordings():
-        ents: dict[str, dict] = defaultdict(
-            lambda: {"archetypes": set(), "rows": 0, "columns": defaultdict(list)}
-        )
-        for chunk in reader.stream(store=store):
-            e = ents[chunk.entity_path]
-            batch = chunk.to_record_batch()
-            e["rows"] += chunk.num_rows
-            for name in batch.schema.names:
-                if ":" in name:
-                    e["archetypes"].add(name.split(":")[0])
-                    e["columns"][name].extend(batch.column(name).to_pylist())
-        out[store.recording_id] = dict(ents)
-    return out
 
 
 def _views(path: Path) -> set[tuple[str, str]]:

@@ -497,16 +497,7 @@ def _parse(
                 f"{_at(yaml_text, where, ('objects', i, 'name'))}: duplicate object name {name!r}"
             )
         x, y, z, yaw = _vec(o["pose"])
-        rng = o.get("range") or {}
-        ranges = {}
-        for axis, nominal in (("x", x), ("y", y), ("yaw", yaw)):
-            lo, hi = _vec(rng.get(axis, (nominal, nominal)))
-            if lo > hi:
-                raise SceneError(
-                    f"{_at(yaml_text, where, ('objects', i, 'range', axis))}: "
-                    f"expected [low, high], found low {lo:g} above high {hi:g}"
-                )
-            ranges[axis] = (lo, hi)
+        ranges = _ranges(o.get("range"), (x, y, yaw), ("objects", i), where, yaml_text)
         sx, sy, sz = _vec(o["size"])
         if shape == "mug" and sx <= sy:
             raise SceneError(
@@ -587,6 +578,28 @@ def _parse(
     return tuple(objects), camera, scale, tuple(success)
 
 
+def _ranges(
+    rng: Mapping[str, Any] | None,
+    nominal: tuple[float, float, float],
+    at: KeyPath,
+    where: str,
+    yaml_text: str,
+) -> dict[str, tuple[float, float]]:
+    """Randomisation ranges of x, y, yaw (``range`` under the key path ``at``); a coordinate
+    left out stays at its ``nominal`` value. SceneError for a range whose low is above its
+    high."""
+    ranges = {}
+    for axis, value in zip(("x", "y", "yaw"), nominal, strict=True):
+        lo, hi = _vec((rng or {}).get(axis, (value, value)))
+        if lo > hi:
+            raise SceneError(
+                f"{_at(yaml_text, where, (*at, 'range', axis))}: "
+                f"expected [low, high], found low {lo:g} above high {hi:g}"
+            )
+        ranges[axis] = (lo, hi)
+    return ranges
+
+
 def _places(raw: Mapping[str, Any]) -> tuple[tuple[str, tuple[float, float, float]], ...]:
     return tuple(
         (str(n), (float(p[0]), float(p[1]), float(p[2])))
@@ -622,16 +635,7 @@ def _start(raw: Mapping[str, Any], where: str, yaml_text: str, robot: Robot) -> 
             f"{robot.name!r} has none"
         )
     x, y, yaw = _vec(st["pose"])
-    rng = st.get("range") or {}
-    ranges = {}
-    for axis, nominal in (("x", x), ("y", y), ("yaw", yaw)):
-        lo, hi = _vec(rng.get(axis, (nominal, nominal)))
-        if lo > hi:
-            raise SceneError(
-                f"{_at(yaml_text, where, ('start', 'range', axis))}: expected [low, high], "
-                f"found low {lo:g} above high {hi:g}"
-            )
-        ranges[axis] = (lo, hi)
+    ranges = _ranges(st.get("range"), (x, y, yaw), ("start",), where, yaml_text)
     return StartSpec((x, y, yaw), ranges["x"], ranges["y"], ranges["yaw"])
 
 
