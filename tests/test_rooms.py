@@ -67,6 +67,20 @@ def test_sample_logs_are_small_and_carry_the_scans() -> None:
     assert math.dist(starts[0][:2], starts[1][:2]) > 0.5
 
 
+def test_rerun_mcap_importer_shows_the_scan_as_points() -> None:
+    from rerun.chunk import McapReader
+
+    positions = []
+    for chunk in McapReader(DEMOS[1], include_topic_regex=["/lidar/points"]).stream():
+        batch = chunk.to_record_batch()
+        if "Points3D:positions" in batch.schema.names:
+            positions += batch.column("Points3D:positions").to_pylist()
+    assert len(positions) == len(read_log(DEMOS[1]).scans)
+    first = np.array(positions[0])
+    assert first.shape == (360, 3)  # every beam of room 1 returns
+    assert 0.3 < np.linalg.norm(first[:, :2], axis=1).min() < 8.0
+
+
 def test_demos_merge_then_branch_by_the_arrow(tree_path: Path) -> None:
     tree = load_tree(tree_path)
     (first,) = tree.children(ROOT)
