@@ -187,10 +187,21 @@ def compile_cmd(
             "--set", help="Override a parameter: KEY=VALUE (e.g. t_hp=0.12, dmp.n_basis=50)."
         ),
     ] = None,
+    topics: Annotated[
+        Path | None,
+        typer.Option(
+            help="The logs are ROS 2 bags: read them through this topic map "
+            "(schemas/topic_map.schema.json).",
+            dir_okay=False,
+        ),
+    ] = None,
 ) -> None:
     """Segment logs, extract SMCs and merge them into a versioned tree.json."""
     from smccli.learn.compile import compile_logs
     from smccli.learn.segmentation import SegmentMode
+    from smccli.logs.ros2_bag import load_topic_map
+
+    topic_map = None if topics is None else load_topic_map(topics)
 
     with Progress(
         TextColumn("[bold]compiling[/]"),
@@ -218,6 +229,7 @@ def compile_cmd(
             overrides=set_ or [],
             on_progress=on_progress,
             on_warning=lambda m: err.print(f"[yellow]warning:[/] {escape(m)}"),
+            topic_map=topic_map,
         )
         progress.update(task, completed=len(logs))
     for p in result.skipped:
@@ -412,9 +424,20 @@ def inspect(
     serve: Annotated[bool, typer.Option(help="Serve Rerun's web viewer on 127.0.0.1.")] = False,
     port: Annotated[int, typer.Option(help="Web viewer port (with --serve).")] = 9090,
     force: Annotated[bool, typer.Option(help="Overwrite an existing --save file.")] = False,
+    topics: Annotated[
+        Path | None,
+        typer.Option(
+            help="The logs are ROS 2 bags: read them through this topic map "
+            "(schemas/topic_map.schema.json).",
+            dir_okay=False,
+        ),
+    ] = None,
 ) -> None:
     """Show the tree and the traces in Rerun."""
     from smccli.inspect import recording as ins
+    from smccli.logs.ros2_bag import load_topic_map
+
+    topic_map = None if topics is None else load_topic_map(topics)
 
     if sum([save is not None, spawn, serve]) > 1:
         raise SmcError("choose one of --save, --spawn, --serve")
@@ -430,6 +453,7 @@ def inspect(
         force=force,
         on_warning=lambda m: err.print(f"[yellow]warning:[/] {escape(m)}"),
         on_message=lambda m: out.print(escape(m), highlight=False, soft_wrap=True),
+        topic_map=topic_map,
     )
     if result.rrd is not None:
         out.print(
@@ -449,14 +473,28 @@ def doctor(
         typer.Option(help="Write LOG's whole chunks as a valid, indexed MCAP (one LOG only)."),
     ] = None,
     force: Annotated[bool, typer.Option(help="Overwrite the --repair output.")] = False,
+    topics: Annotated[
+        Path | None,
+        typer.Option(
+            help="The logs are ROS 2 bags: read them through this topic map "
+            "(schemas/topic_map.schema.json).",
+            dir_okay=False,
+        ),
+    ] = None,
 ) -> None:
     """Check logs before compiling: exit 0 healthy, 1 warnings, 2 a log compile would reject."""
     from smccli.learn import doctor as dr
+    from smccli.logs.ros2_bag import load_topic_map
 
     if repair is not None and len(logs) != 1:
         raise SmcError(f"--repair takes exactly one LOG, got {len(logs)}")
+    if repair is not None and topics is not None:
+        raise SmcError("--repair rewrites smc logs, not ROS 2 bags (--topics)")
+    topic_map = None if topics is None else load_topic_map(topics)
     fixed = dr.repair(logs[0], repair, force=force) if repair is not None else None
-    diagnoses = [dr.diagnose(p) for p in logs] + ([dr.diagnose(fixed.path)] if fixed else [])
+    diagnoses = [dr.diagnose(p, topic_map) for p in logs] + (
+        [dr.diagnose(fixed.path)] if fixed else []
+    )
     colour = {"ok": "green", "warn": "yellow", "error": "bold red"}
     for d in diagnoses:
         title = f"{escape(str(d.path))}: [{colour[d.status]}]{d.status}[/]"
@@ -476,6 +514,61 @@ def doctor(
         )
     # With --repair the code is the repaired file's: that is the log the user goes on with.
     raise typer.Exit(dr.exit_code(diagnoses[-1:] if fixed else diagnoses))
+
+
+@app.command()
+def export(
+    log: Annotated[Path, typer.Argument(help="Native smc log (.mcap) to export.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Bag to write (.mcap).")],
+    ros2: Annotated[
+        bool, typer.Option("--ros2", help="As a ROS 2 bag (MCAP, CDR); the only format so far.")
+    ] = False,
+    force: Annotated[bool, typer.Option(help="Overwrite an existing output.")] = False,
+    topics: Annotated[
+        Path | None,
+        typer.Option(
+            help="Where to write the bag's topic map (for smc compile --topics); "
+            "default: BAG with the suffix .topics.yaml.",
+            dir_okay=False,
+        ),
+    ] = None,
+) -> None:
+    """Export a log for other tools: --ros2 writes a ROS 2 bag (MCAP storage, CDR messages)
+    and the topic map that reads it back."""
+    import yaml
+
+    from smccli.logs.ros2_export import export_ros2
+    from smccli.outputs import check_output, write_atomic
+
+    if not ros2:
+        raise SmcError("choose the output format: --ros2 (the only one so far)")
+    topics = topics or output.with_suffix(".topics.yaml")
+    check_output(topics, force=force)
+    summary = export_ros2(
+        log,
+        output,
+        force=force,
+        on_warning=lambda m: err.print(f"[yellow]warning:[/] {escape(m)}"),
+    )
+    out.print(
+        f"[bold green]wrote[/] {escape(str(summary.out))}  (ROS 2 bag, "
+        f"{summary.size_bytes / 1e6:.2f} MB from {summary.source_bytes / 1e6:.2f} MB, "
+        f"{sum(summary.messages.values())} messages)",
+        highlight=False,
+    )
+    width = max(map(len, summary.messages), default=0)
+    for topic, count in summary.messages.items():  # plain lines: names are never cut
+        out.print(
+            f"  {escape(topic):<{width}}  {count:>6}  {summary.types[topic]}",
+            highlight=False,
+            soft_wrap=True,
+        )
+    if summary.skipped:
+        skipped = ", ".join(f"{t} ({n})" for t, n in sorted(summary.skipped.items()))
+        out.print(f"not exported: {escape(skipped)}", highlight=False)
+    head = "# Topic map of an exported bag (schemas/topic_map.schema.json)\n"
+    write_atomic(topics, head + yaml.safe_dump(summary.topic_map(), sort_keys=False))
+    out.print(f"[bold green]wrote[/] {escape(str(topics))}  (its topic map)", highlight=False)
 
 
 def main() -> None:

@@ -65,6 +65,7 @@ import numpy as np
 
 from smccli.errors import LogError, SmcError
 from smccli.learn.tree import ROOT, Edge, Tree, load_tree
+from smccli.logs.ros2_bag import TopicMap
 from smccli.outputs import check_output
 from smccli.perception.colours import colour_name, dominant_rgb
 
@@ -121,8 +122,10 @@ def inspect(
     force: bool = False,
     on_warning: Callable[[str], None] | None = None,
     on_message: Callable[[str], None] | None = None,
+    topic_map: TopicMap | None = None,
 ) -> InspectResult:
     """Show ``tree_path`` and ``logs`` in Rerun: write ``save`` (.rrd), spawn or serve a viewer.
+    With ``topic_map`` the logs are ROS 2 bags read through it.
 
     The output is checked first (its folder exists and is writable; an existing file needs
     ``force``), then inputs are all read and checked: a missing or corrupt tree or log raises
@@ -143,8 +146,14 @@ def inspect(
         check_output(save, force=force)
     tree = load_tree(Path(tree_path))
     from smccli.logs import read_log
+    from smccli.logs.ros2_bag import read_ros2_bag
 
-    loaded = [read_log(Path(p), on_warning=warn) for p in logs]
+    loaded = [
+        read_log(Path(p), on_warning=warn)
+        if topic_map is None
+        else read_ros2_bag(Path(p), topic_map, on_warning=warn)
+        for p in logs
+    ]
     if serve:
         with tempfile.TemporaryDirectory(prefix="smc-inspect-") as tmp:
             rrd = Path(tmp) / "inspect.rrd"

@@ -32,6 +32,7 @@ from smccli.learn.smc import (
 from smccli.learn.tree import FORMAT, Tree, insert_chain, load_tree, save_tree
 from smccli.logs import Log, read_log
 from smccli.logs.robot import geometry_at, robot_model_of
+from smccli.logs.ros2_bag import TopicMap, read_ros2_bag
 from smccli.outputs import check_output
 from smccli.perception import Cluster, clusters_from_frame, salient_cluster, scale_reading
 from smccli.perception.room import room_histogram
@@ -326,11 +327,14 @@ def compile_logs(
     overrides: Sequence[str] = (),
     on_progress: Callable[[Path, str], None] | None = None,
     on_warning: Callable[[str], None] | None = None,
+    topic_map: TopicMap | None = None,
 ) -> CompileResult:
     """Add the logs to the tree at ``out`` (created if absent) and write it atomically.
 
     A log already in the tree is skipped. Parameters that differ from the tree's are
     refused unless ``rebuild``. Any bad log aborts the compile before the file is touched.
+    With ``topic_map`` the logs are ROS 2 bags read through it
+    (:func:`smccli.logs.ros2_bag.read_ros2_bag`).
     """
     # The tree is updated in place by design (Algorithm 1 is incremental); what must hold
     # before reading any log is that it can be written at all.
@@ -365,7 +369,11 @@ def compile_logs(
             path = Path(path)
             if on_progress:
                 on_progress(path, "reading")
-            log = read_log(path, topics=READ_TOPICS, on_warning=warn)
+            log = (
+                read_log(path, topics=READ_TOPICS, on_warning=warn)
+                if topic_map is None
+                else read_ros2_bag(path, topic_map, on_warning=warn)
+            )
             scene = scene_of_log(log.attachments, path)
             missing = sorted(
                 _required_topics(log, scene) - {t for t, n in log.topic_counts.items() if n > 0}

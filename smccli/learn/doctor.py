@@ -42,6 +42,7 @@ from smccli.logs.reader import (
     copy_log,
     read_log,
 )
+from smccli.logs.ros2_bag import TopicMap, read_ros2_bag
 from smccli.outputs import check_output, write_atomic
 
 Status = Literal["ok", "warn", "error"]
@@ -319,8 +320,8 @@ def _check_read(c: _Context) -> Check:
     said = ("truncated at byte", f"no {tp.METADATA_NAME!r} metadata record")
     others = [w for w in c.warnings if not any(s in w for s in said)]
     counts = c.log.topic_counts
-    times = [m.log_time for m in c.raw.messages] if c.raw else []
-    span = (max(times) - min(times)) / 1e9 if times else 0.0
+    times = [m.log_time / 1e9 for m in c.raw.messages] if c.raw else [*c.log.poi_t]
+    span = max(times) - min(times) if times else 0.0
     text = f"reads as compile reads it: {sum(counts.values())} messages over {span:.2f} s"
     if others:
         return Check("read", "warn", text + "; " + "; ".join(_one_line(c.path, w) for w in others))
@@ -606,8 +607,9 @@ def _guarded(name: str, fn: Callable[[_Context], Check], c: _Context) -> Check:
         return Check(name, "error", _one_line(c.path, f"{type(e).__name__}: {e}"))
 
 
-def diagnose(path: str | os.PathLike[str]) -> Diagnosis:
-    """Check one log; never raises for a bad or missing file (its rows say why)."""
+def diagnose(path: str | os.PathLike[str], topic_map: TopicMap | None = None) -> Diagnosis:
+    """Check one log; never raises for a bad or missing file (its rows say why). With
+    ``topic_map`` the log is a ROS 2 bag, checked through the map."""
     from smccli.learn.compile import READ_TOPICS
 
     path = Path(path)
@@ -618,6 +620,8 @@ def diagnose(path: str | os.PathLike[str]) -> Diagnosis:
     if not data.startswith(_MAGIC):
         why = f"not an MCAP file (starts with {data[:8]!r}, {len(data)} bytes)"
         return _diagnosis(path, [Check("file", "error", why)])
+    if topic_map is not None:
+        return _diagnose_bag(path, data, topic_map)
     c = _Context(path=path, data=data, layout=_layout(data))
     try:
         c.raw = _scan(path, data)
@@ -639,6 +643,22 @@ def diagnose(path: str | os.PathLike[str]) -> Diagnosis:
             for name, fn, needs_log in _CHECKS
             if c.log is not None or not needs_log
         ]
+    return _diagnosis(path, checks)
+
+
+def _diagnose_bag(path: Path, data: bytes, topic_map: TopicMap) -> Diagnosis:
+    """A ROS 2 bag: the file, then reading it through the map (topics present and of the
+    mapped types, CDR decoding, transforms), then what compile needs (topics, marks)."""
+    c = _Context(path=path, data=data, layout=_layout(data))
+    try:
+        c.log = read_ros2_bag(path, topic_map, on_warning=c.warnings.append)
+    except SmcError as e:
+        c.read_error = _one_line(path, str(e))
+    except Exception as e:  # a bag the decoder chokes on is a finding, not a traceback
+        c.read_error = f"reader failed: {type(e).__name__}: {e}"
+    checks = [_check_file(c), _check_crc(c), _check_read(c)]
+    if c.log is not None:
+        checks += [_guarded(n, fn, c) for n, fn, needs in _CHECKS if needs]
     return _diagnosis(path, checks)
 
 

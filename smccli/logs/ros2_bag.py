@@ -1,0 +1,453 @@
+"""ROS 2 bags in: a bag (MCAP storage, CDR messages) read into a :class:`~smccli.logs.Log`
+through a topic map, so ``smc compile``, ``doctor`` and ``inspect`` take what real robots
+record.
+
+The map (``schemas/topic_map.schema.json``) says which topic is the colour image, the depth
+and its scale, the camera info, the POI pose, the joints, the teleoperation command and
+gripper command (optional: else the measured POI and the gripper's measured opening), the
+weight, the lidar and the saliency marks. Frames come from ``/tf`` and ``/tf_static``:
+every pose, image and scan is put in the map's ``world_frame`` at its own stamp. CDR is
+decoded from the definitions stored in the bag (``mcap-ros2-support``: no ROS install).
+
+A bag carries no scene: the map names it (the robot's model is needed for the
+self-filter, the gripper and the sensors); a bag exported by ``smc export --ros2`` carries
+the scene as attachments, which are used first.
+"""
+
+from __future__ import annotations
+
+import bisect
+import hashlib
+import io
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from scipy.spatial.transform import Rotation
+
+from smccli.errors import LogError, SceneError
+from smccli.logs import topics as tp
+from smccli.logs.reader import Log, Scan
+from smccli.schemas import validate_yaml
+from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
+
+ROLES: dict[str, tuple[str, tuple[str, ...]]] = {
+    "command": (tp.COMMAND, ("geometry_msgs/msg/PoseStamped",)),
+    "gripper_command": (tp.COMMAND, ("std_msgs/msg/Float64",)),
+    "poi": (tp.POI, ("geometry_msgs/msg/PoseStamped",)),
+    "joint_states": (tp.JOINT_STATES, ("sensor_msgs/msg/JointState",)),
+    "color": (tp.COLOR, ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")),
+    "depth": (tp.DEPTH, ("sensor_msgs/msg/Image",)),
+    "camera_info": (tp.CALIBRATION, ("sensor_msgs/msg/CameraInfo",)),
+    "weight": (tp.WEIGHT, ("std_msgs/msg/Float64",)),
+    "lidar": (tp.SCAN, ("sensor_msgs/msg/LaserScan",)),
+    "marks": (tp.SALIENCY, ("std_msgs/msg/String", "std_msgs/msg/Empty")),
+}
+"""Map role -> (the native topic it stands for, the ROS 2 types it may hold)."""
+TF_TOPICS = ("/tf", "/tf_static")
+FRAME_MATCH_NS = 20_000_000
+"""A depth image belongs to the colour image whose stamp is this close [ns] (20 ms)."""
+
+
+@dataclass(frozen=True, slots=True)
+class TopicMap:
+    """A parsed, checked topic map."""
+
+    path: Path | None
+    """The map file, or None when built in code."""
+    scene: str
+    """The scene: a built-in name, or the path of a scene.yaml (resolved)."""
+    world_frame: str
+    """The fixed frame of poses and transforms."""
+    topics: dict[str, str]
+    """Role (``color``, ``poi``, ...) -> topic."""
+    depth_scale: float = 0.001
+    """Metres per unit of a 16UC1 depth image."""
+
+
+def parse_topic_map(data: dict[str, Any], path: Path | None = None) -> TopicMap:
+    """A map from already schema-valid data (``schemas/topic_map.schema.json``)."""
+    topics: dict[str, str] = {}
+    scale = 0.001
+    for role, value in data["topics"].items():
+        if isinstance(value, dict):
+            topics[role] = str(value["topic"])
+            scale = float(value.get("scale", scale)) if role == "depth" else scale
+        else:
+            topics[role] = str(value)
+    scene = str(data["scene"])
+    if path is not None and (scene.endswith((".yaml", ".yml")) or "/" in scene):
+        scene = str((path.parent / scene).resolve())
+    return TopicMap(path, scene, str(data.get("world_frame", "world")), topics, scale)
+
+
+def load_topic_map(path: str | Path) -> TopicMap:
+    """Read and check a topic map file; SceneError (one line: file, key, line) when bad."""
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"{p}: cannot read topic map: {exc}") from None
+    return parse_topic_map(validate_yaml(text, "topic_map", str(p), SceneError), p)
+
+
+# --- transforms --------------------------------------------------------------------------
+
+
+class _TfBuffer:
+    """Transforms parent -> child over time (``/tf``) and static (``/tf_static``); a frame's
+    pose in the world frame at a time is the chain of the latest transforms up to it."""
+
+    def __init__(self, world: str) -> None:
+        self.world = world
+        self._dynamic: dict[str, tuple[list[int], list[tuple[str, np.ndarray]]]] = {}
+        self._static: dict[str, tuple[str, np.ndarray]] = {}
+
+    def add(self, msg: Any, static: bool) -> None:
+        for tr in msg.transforms:
+            t, r = tr.transform.translation, tr.transform.rotation
+            T = np.eye(4)
+            T[:3, :3] = Rotation.from_quat([r.x, r.y, r.z, r.w]).as_matrix()
+            T[:3, 3] = [t.x, t.y, t.z]
+            parent = tr.header.frame_id.lstrip("/")
+            child = tr.child_frame_id.lstrip("/")
+            if static:
+                self._static[child] = (parent, T)
+            else:
+                times, values = self._dynamic.setdefault(child, ([], []))
+                times.append(_ns(tr.header.stamp))
+                values.append((parent, T))
+
+    def lookup(self, frame: str, t_ns: int) -> np.ndarray | None:
+        """T_world_frame at ``t_ns`` (the latest transform of each link at or before it, else
+        the first one), or None when the chain does not reach the world frame."""
+        T = np.eye(4)
+        frame = frame.lstrip("/")
+        for _ in range(32):
+            if frame == self.world:
+                return T
+            if frame in self._static:
+                parent, link = self._static[frame]
+            elif frame in self._dynamic:
+                times, values = self._dynamic[frame]
+                i = max(bisect.bisect_right(times, t_ns) - 1, 0)
+                parent, link = values[i]
+            else:
+                return None
+            T = link @ T
+            frame = parent
+        return None
+
+
+def _ns(stamp: Any) -> int:
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def _yaw(R: np.ndarray) -> float:
+    return math.atan2(R[1, 0], R[0, 0])
+
+
+# --- reading -----------------------------------------------------------------------------
+
+
+def read_ros2_bag(
+    path: str | Path,
+    topic_map: TopicMap,
+    *,
+    on_warning: Callable[[str], None] | None = None,
+) -> Log:
+    """Read a ROS 2 bag through ``topic_map`` into a Log (times in seconds of the bag's
+    clock; poses in the map's world frame).
+
+    LogError (one line naming the file, and the topic) for a file that is not a readable
+    MCAP, a bag that is not ROS 2 (its schemas not ``ros2msg``), a mapped topic missing or
+    holding another type, a pose without a transform to the world frame, an image that
+    does not decode.
+    """
+    from smccli.world.scene import load_scene
+
+    path = Path(path)
+    warn = on_warning or (lambda msg: None)
+    if not path.is_file():
+        raise LogError(f"{path}: no such file")
+    data = path.read_bytes()
+    try:
+        reader = make_reader(io.BytesIO(data), decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        attachments = {a.name: bytes(a.data) for a in reader.iter_attachments()}
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+    except (McapError, ValueError, EOFError, KeyError) as exc:
+        raise LogError(f"{path}: not a readable MCAP file ({exc})") from None
+    if summary is None or not summary.channels:
+        raise LogError(f"{path}: the bag holds no topics")
+    types = {c.topic: summary.schemas[c.schema_id] for c in summary.channels.values()}
+    counts: dict[str, int] = {}
+    stats = summary.statistics
+    if stats is not None:
+        for cid, n in stats.channel_message_counts.items():
+            counts[summary.channels[cid].topic] = n
+    for role, topic in topic_map.topics.items():
+        where = f"{path}: topic {topic} (the map's {role})"
+        if topic not in types or counts.get(topic, 1) == 0:
+            have = ", ".join(sorted(types)) or "none"
+            raise LogError(f"{where} missing (topics in the bag: {have})")
+        schema = types[topic]
+        expected = ROLES[role][1]
+        if schema.encoding != "ros2msg":
+            raise LogError(f"{where} holds {schema.encoding} {schema.name}, expected ROS 2 CDR")
+        if schema.name not in expected:
+            raise LogError(f"{where} holds {schema.name}, expected {' or '.join(expected)}")
+
+    scene = load_scene(topic_map.scene)
+    if "scene.yaml" not in attachments or "scene.xml" not in attachments:
+        attachments = {
+            "scene.yaml": scene.yaml_text.encode(),
+            "scene.xml": scene.mjcf.encode(),
+            "robot.yaml": scene.robot.yaml_text.encode(),
+        }
+    meta = metadata.get(tp.METADATA_NAME) or {
+        "scene": scene.name,
+        "scene_digest": scene.digest,
+        "operator": "ros2",
+        "has_scale": "true" if "weight" in topic_map.topics else "false",
+    }
+
+    b = _Builder(path, topic_map, scene.robot, warn)
+    wanted = [*topic_map.topics.values(), *(t for t in TF_TOPICS if t in types)]
+    try:
+        for _schema, channel, message, decoded in reader.iter_decoded_messages(
+            topics=wanted, log_time_order=True
+        ):
+            b.add(channel.topic, message.log_time, decoded)
+    except (McapError, ValueError, EOFError) as exc:
+        raise LogError(f"{path}: a message does not decode ({exc})") from None
+    native_counts = {ROLES[r][0]: counts.get(t, 0) for r, t in topic_map.topics.items()}
+    if "command" not in topic_map.topics:
+        native_counts[tp.COMMAND] = len(b.poi)  # the measured POI is the demonstrated path
+    native_counts[tp.TF] = sum(counts.get(t, 0) for t in TF_TOPICS)
+    return Log(
+        path=path,
+        sha256=hashlib.sha256(data).hexdigest(),
+        metadata={str(k): str(v) for k, v in meta.items()},
+        attachments=attachments,
+        commands=b.commands(),
+        joint_states=b.joints,
+        poi_t=np.array(b.poi_t, dtype=float),
+        poi=_unwrapped(np.array(b.poi, dtype=float).reshape(-1, 4)),
+        frames=b.frames(),
+        weight_t=np.array(b.weight_t, dtype=float),
+        weight=np.array(b.weight, dtype=float),
+        marks=b.marks,
+        ground_truth=[],
+        decisions=[],
+        topic_counts=native_counts,
+        truncated=False,
+        scans=b.scans,
+        end=metadata.get(tp.END_METADATA_NAME, {}),
+    )
+
+
+def _unwrapped(poi: np.ndarray) -> np.ndarray:
+    if len(poi):
+        poi[:, 3] = np.unwrap(poi[:, 3])
+    return poi
+
+
+class _Builder:
+    """Collects the decoded messages of one bag, role by role."""
+
+    def __init__(self, path: Path, m: TopicMap, robot: Any, warn: Callable[[str], None]) -> None:
+        self.path, self.map, self.robot, self.warn = path, m, robot, warn
+        self.role = {topic: role for role, topic in m.topics.items()}
+        self.tf = _TfBuffer(m.world_frame)
+        self.targets: list[tuple[float, np.ndarray]] = []
+        self.grip: list[tuple[float, float]] = []
+        self.joints: list[JointState] = []
+        self.poi_t: list[float] = []
+        self.poi: list[np.ndarray] = []
+        self.color: list[tuple[int, str, Any]] = []
+        self.depth: list[tuple[int, Any]] = []
+        self.info: list[tuple[int, np.ndarray]] = []
+        self.weight_t: list[float] = []
+        self.weight: list[float] = []
+        self.marks: list[SaliencyMark] = []
+        self.scans: list[Scan] = []
+
+    def add(self, topic: str, t_ns: int, msg: Any) -> None:
+        if topic in TF_TOPICS:
+            self.tf.add(msg, static=topic == "/tf_static")
+            return
+        role = self.role[topic]
+        t = t_ns / 1e9
+        if role in ("command", "poi"):
+            pose = self._pose(topic, msg)
+            if role == "command":
+                self.targets.append((t, pose))
+            else:
+                self.poi_t.append(t)
+                self.poi.append(pose)
+        elif role == "gripper_command":
+            self.grip.append((t, float(msg.data)))
+        elif role == "joint_states":
+            n = len(msg.name)
+            zeros = np.zeros(n)
+            self.joints.append(
+                JointState(
+                    t=t,
+                    names=tuple(msg.name),
+                    position=np.array(msg.position, dtype=float),
+                    velocity=np.array(msg.velocity, dtype=float) if msg.velocity else zeros,
+                    effort=np.array(msg.effort, dtype=float) if msg.effort else zeros,
+                )
+            )
+        elif role == "color":
+            self.color.append((_ns(msg.header.stamp), msg.header.frame_id, msg))
+        elif role == "depth":
+            self.depth.append((_ns(msg.header.stamp), msg))
+        elif role == "camera_info":
+            self.info.append((_ns(msg.header.stamp), np.array(msg.k, dtype=float).reshape(3, 3)))
+        elif role == "weight":
+            self.weight_t.append(t)
+            self.weight.append(float(msg.data))
+        elif role == "marks":
+            self.marks.append(SaliencyMark(t=t, source="operator", label=getattr(msg, "data", "")))
+        elif role == "lidar":
+            n = len(msg.ranges)
+            end = msg.angle_min + msg.angle_increment * (n - 1)
+            ranges = np.array(msg.ranges, dtype=float)
+            self.scans.append(
+                Scan(t, float(msg.angle_min), float(end), ranges, msg.header.frame_id)
+            )
+
+    def _pose(self, topic: str, msg: Any) -> np.ndarray:
+        """A PoseStamped as ``[x, y, z, yaw]`` in the world frame."""
+        p, q = msg.pose.position, msg.pose.orientation
+        T = np.eye(4)
+        T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+        T[:3, 3] = [p.x, p.y, p.z]
+        frame = msg.header.frame_id or self.map.world_frame
+        W = self.tf.lookup(frame, _ns(msg.header.stamp))
+        if W is None:
+            raise LogError(
+                f"{self.path}: {topic} at t={_ns(msg.header.stamp) / 1e9:.3f} s: no transform "
+                f"from frame {frame!r} to {self.map.world_frame!r} in /tf or /tf_static"
+            )
+        T = W @ T
+        return np.array([*T[:3, 3], _yaw(T[:3, :3])])
+
+    def commands(self) -> list[PoiCommand]:
+        """The teleoperation commands; without a command topic, the measured POI (and the
+        gripper's measured opening, without a gripper command topic)."""
+        targets = self.targets or list(zip(self.poi_t, self.poi, strict=True))
+        g_t = np.array([t for t, _ in self.grip])
+        g_v = [v for _, v in self.grip]
+        j_t = np.array([j.t for j in self.joints])
+        out = []
+        for t, target in targets:
+            if len(g_t):
+                i = max(int(np.searchsorted(g_t, t + 1e-9)) - 1, 0)
+                grip = g_v[i]
+            else:
+                grip = self._opening(j_t, t)
+            out.append(PoiCommand(t=t, target=np.asarray(target, dtype=float), gripper=grip))
+        return out
+
+    def _opening(self, j_t: np.ndarray, t: float) -> float:
+        """The gripper's measured opening in [0, 1] at ``t`` (1 without a gripper)."""
+        g = self.robot.gripper
+        if g is None or not len(j_t):
+            return 1.0
+        js = self.joints[max(int(np.searchsorted(j_t, t + 1e-9)) - 1, 0)]
+        idx = [js.names.index(n) for n in g.joints if n in js.names]
+        if len(idx) != len(g.joints):
+            return 1.0
+        return float(g.opening(js.position[idx]))
+
+    def frames(self) -> list[CameraFrame]:
+        """Colour images joined with the depth of the same stamp, the latest camera info
+        and the camera's pose from the transforms."""
+        from smccli.logs.topics import decode_color
+
+        depth_t = np.array([t for t, _ in self.depth], dtype=np.int64)
+        info_t = [t for t, _ in self.info]
+        out, dropped = [], 0
+        for t_ns, frame_id, msg in self.color:
+            rgb = self._rgb(msg, decode_color)
+            i = int(np.argmin(np.abs(depth_t - t_ns))) if len(depth_t) else -1
+            k = bisect.bisect_right(info_t, t_ns) - 1
+            T = self.tf.lookup(frame_id, t_ns)
+            if i < 0 or abs(int(depth_t[i]) - t_ns) > FRAME_MATCH_NS or T is None:
+                dropped += 1
+                continue
+            depth = self._depth(self.depth[i][1], rgb.shape[:2])
+            K = self.info[max(k, 0)][1] if self.info else None
+            if K is None:
+                dropped += 1
+                continue
+            out.append(CameraFrame(t_ns / 1e9, rgb, depth, K, T, frame_id))
+        if dropped:
+            self.warn(
+                f"{self.path}: {dropped} colour images lack a depth image within 20 ms, camera "
+                "info or a transform to the world frame"
+            )
+        return out
+
+    def _rgb(self, msg: Any, decode_color: Callable[[bytes], np.ndarray | None]) -> np.ndarray:
+        topic = self.map.topics["color"]
+        if hasattr(msg, "format"):  # CompressedImage
+            rgb = decode_color(bytes(msg.data))
+            if rgb is None:
+                raise LogError(
+                    f"{self.path}: {topic}: image does not decode (format {msg.format!r})"
+                )
+            return rgb
+        enc = msg.encoding.lower()
+        if enc not in ("rgb8", "bgr8"):
+            raise LogError(
+                f"{self.path}: {topic}: encoding {msg.encoding!r}, expected rgb8 or bgr8"
+            )
+        img = _rows(msg, 3, np.uint8)
+        return img[:, :, ::-1].copy() if enc == "bgr8" else img
+
+    def _depth(self, msg: Any, shape: tuple[int, ...]) -> np.ndarray:
+        topic = self.map.topics["depth"]
+        enc = msg.encoding.upper()
+        if enc == "16UC1":
+            img = _rows(msg, 1, np.dtype("<u2") if not msg.is_bigendian else np.dtype(">u2"))
+            # In float64, then float32: for millimetres with scale 0.001 this equals the native
+            # reader's mm / 1000 for every 16-bit value (float32 * 0.001 differs for 38850).
+            depth = (img.astype(np.float64) * self.map.depth_scale).astype(np.float32)
+        elif enc == "32FC1":
+            img = _rows(msg, 1, np.dtype("<f4") if not msg.is_bigendian else np.dtype(">f4"))
+            depth = np.nan_to_num(img.astype(np.float32), nan=0.0, posinf=0.0)
+        else:
+            raise LogError(
+                f"{self.path}: {topic}: encoding {msg.encoding!r}, expected 16UC1 or 32FC1"
+            )
+        depth = depth.reshape(msg.height, msg.width)
+        if depth.shape != shape:
+            raise LogError(
+                f"{self.path}: {topic}: depth {msg.width}x{msg.height} differs from the colour "
+                f"image's {shape[1]}x{shape[0]}"
+            )
+        return depth
+
+
+def _rows(msg: Any, channels: int, dtype: Any) -> np.ndarray:
+    """The pixels of a sensor_msgs/Image, rows of ``step`` bytes (padding dropped)."""
+    dt = np.dtype(dtype)
+    row = msg.width * channels * dt.itemsize
+    raw = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.step)[:, :row]
+    img = raw.copy().view(dt).reshape(msg.height, msg.width, channels)
+    return img[:, :, 0] if channels == 1 else img
+
+
+def topics_of(topic_map: TopicMap) -> Iterable[str]:
+    """The bag topics a map reads."""
+    return topic_map.topics.values()
