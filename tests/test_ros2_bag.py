@@ -107,6 +107,10 @@ def test_bag_reads_like_the_native_log(bags) -> None:
     assert np.allclose([c.target for c in bag.commands], [c.target for c in native.commands])
     assert np.array_equal(bag.weight, native.weight)
     assert [(m.t, m.label) for m in bag.marks] == [(m.t, m.label) for m in native.marks]
+    # The clouds (PointCloud2, in the world frame here), colours unpacked from PCL's rgb.
+    assert len(bag.point_clouds) == len(native.point_clouds) > 0
+    a, b = bag.point_clouds[0], native.point_clouds[0]
+    assert np.array_equal(a.points, b.points) and np.array_equal(a.colors, b.colors)
 
 
 # --- a bag shaped like a real robot's ------------------------------------------------------

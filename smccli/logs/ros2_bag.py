@@ -33,7 +33,7 @@ from scipy.spatial.transform import Rotation
 
 from smccli.errors import LogError, SceneError
 from smccli.logs import topics as tp
-from smccli.logs.reader import Log, Scan
+from smccli.logs.reader import Log, PointCloudMsg, Scan
 from smccli.schemas import validate_yaml
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
@@ -48,6 +48,7 @@ ROLES: dict[str, tuple[str, tuple[str, ...]]] = {
     "weight": (tp.WEIGHT, ("std_msgs/msg/Float64",)),
     "lidar": (tp.SCAN, ("sensor_msgs/msg/LaserScan",)),
     "marks": (tp.SALIENCY, ("std_msgs/msg/String", "std_msgs/msg/Empty")),
+    "points": (tp.POINTS, ("sensor_msgs/msg/PointCloud2",)),
 }
 """Map role -> (the native topic it stands for, the ROS 2 types it may hold)."""
 TF_TOPICS = ("/tf", "/tf_static")
@@ -249,6 +250,7 @@ def read_ros2_bag(
         topic_counts=native_counts,
         truncated=False,
         scans=b.scans,
+        point_clouds=b.clouds,
         end=metadata.get(tp.END_METADATA_NAME, {}),
     )
 
@@ -278,6 +280,7 @@ class _Builder:
         self.weight: list[float] = []
         self.marks: list[SaliencyMark] = []
         self.scans: list[Scan] = []
+        self.clouds: list[PointCloudMsg] = []
 
     def add(self, topic: str, t_ns: int, msg: Any) -> None:
         if topic in TF_TOPICS:
@@ -317,6 +320,8 @@ class _Builder:
             self.weight.append(float(msg.data))
         elif role == "marks":
             self.marks.append(SaliencyMark(t=t, source="operator", label=getattr(msg, "data", "")))
+        elif role == "points":
+            self.clouds.append(self._cloud(t, msg))
         elif role == "lidar":
             n = len(msg.ranges)
             end = msg.angle_min + msg.angle_increment * (n - 1)
@@ -340,6 +345,36 @@ class _Builder:
             )
         T = W @ T
         return np.array([*T[:3, 3], _yaw(T[:3, :3])])
+
+    def _cloud(self, t: float, msg: Any) -> PointCloudMsg:
+        """A PointCloud2's x, y, z (FLOAT32) and packed ``rgb``, moved into the world frame."""
+        fields = {f.name: f for f in msg.fields}
+        topic = self.map.topics["points"]
+        if any(k not in fields or fields[k].datatype != 7 for k in "xyz"):
+            raise LogError(f"{self.path}: {topic}: expected FLOAT32 fields x, y, z")
+        n = msg.width * msg.height
+        raw = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(n, msg.point_step)
+        endian = ">" if msg.is_bigendian else "<"
+
+        def column(name: str, kind: str) -> np.ndarray:
+            off = fields[name].offset
+            return raw[:, off : off + 4].copy().view(endian + kind).reshape(n)
+
+        xyz = np.stack([column(k, "f4") for k in "xyz"], axis=1).astype(np.float64)
+        ok = np.isfinite(xyz).all(axis=1)
+        colors = None
+        if "rgb" in fields:
+            packed = column("rgb", "u4")[ok]
+            colors = np.stack([(packed >> s) & 0xFF for s in (16, 8, 0)], axis=1).astype(np.uint8)
+        frame = msg.header.frame_id or self.map.world_frame
+        W = self.tf.lookup(frame, _ns(msg.header.stamp))
+        if W is None:
+            raise LogError(
+                f"{self.path}: {topic}: no transform from frame {frame!r} to "
+                f"{self.map.world_frame!r} in /tf or /tf_static"
+            )
+        pts = (xyz[ok] @ W[:3, :3].T + W[:3, 3]).astype(np.float32)
+        return PointCloudMsg(t, pts, colors, self.map.world_frame)
 
     def commands(self) -> list[PoiCommand]:
         """The teleoperation commands; without a command topic, the measured POI (and the

@@ -132,6 +132,7 @@ EXPORT_MAP = {
         "weight": "/scale/weight",
         "lidar": "/scan",
         "marks": "/saliency",
+        "points": "/perception/points",
     },
 }
 """The topic map (``schemas/topic_map.schema.json``, without its ``scene``) that reads an
