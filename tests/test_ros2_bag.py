@@ -233,6 +233,13 @@ def test_a_real_robots_bag_reads_into_the_world_frame(tmp_path: Path) -> None:
     )
     assert [m.label for m in log.marks] == [""] and log.marks[0].source == "operator"
     assert log.metadata["scene"] == "bench_pick" and "scene.yaml" in log.attachments
+    # A bag directory as `ros2 bag record` writes it reads the same.
+    folder = tmp_path / "rosbag2_2026_11_22"
+    folder.mkdir()
+    (folder / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    bag.rename(folder / "rosbag2_2026_11_22_0.mcap")
+    again = read_ros2_bag(folder, load_topic_map(tmp_path / "map.yaml"))
+    assert len(again.frames) == 3 and again.path.name == "rosbag2_2026_11_22_0.mcap"
 
 
 # --- bad maps and bags --------------------------------------------------------------------

@@ -42,7 +42,7 @@ from smccli.logs.reader import (
     copy_log,
     read_log,
 )
-from smccli.logs.ros2_bag import TopicMap, read_ros2_bag
+from smccli.logs.ros2_bag import TopicMap, read_ros2_bag, resolve_bag
 from smccli.outputs import check_output, write_atomic
 
 Status = Literal["ok", "warn", "error"]
@@ -614,6 +614,8 @@ def diagnose(path: str | os.PathLike[str], topic_map: TopicMap | None = None) ->
 
     path = Path(path)
     try:
+        if topic_map is not None:
+            path = resolve_bag(path)
         data = _read_bytes(path)
     except SmcError as e:
         return _diagnosis(path, [Check("file", "error", _one_line(path, str(e)))])

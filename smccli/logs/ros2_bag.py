@@ -157,6 +157,22 @@ def _yaw(R: np.ndarray) -> float:
 # --- reading -----------------------------------------------------------------------------
 
 
+def resolve_bag(path: str | Path) -> Path:
+    """The MCAP file of a bag: the path itself, or the one ``.mcap`` in a bag directory as
+    ``ros2 bag record`` writes it (``metadata.yaml`` + ``NAME_0.mcap``). LogError when there
+    is none, or several (a split bag: pass its parts one by one)."""
+    p = Path(path)
+    if p.is_dir():
+        parts = sorted(p.glob("*.mcap"))
+        if len(parts) != 1:
+            found = ", ".join(q.name for q in parts) or "none"
+            raise LogError(f"{p}: a bag directory needs exactly one .mcap file, found {found}")
+        return parts[0]
+    if not p.is_file():
+        raise LogError(f"{p}: no such file")
+    return p
+
+
 def read_ros2_bag(
     path: str | Path,
     topic_map: TopicMap,
@@ -173,10 +189,8 @@ def read_ros2_bag(
     """
     from smccli.world.scene import load_scene
 
-    path = Path(path)
+    path = resolve_bag(path)
     warn = on_warning or (lambda msg: None)
-    if not path.is_file():
-        raise LogError(f"{path}: no such file")
     data = path.read_bytes()
     try:
         reader = make_reader(io.BytesIO(data), decoder_factories=[DecoderFactory()])
