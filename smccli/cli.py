@@ -47,6 +47,17 @@ class SegmentChoice(str, Enum):
     both = "both"
 
 
+TopicsOption = Annotated[
+    Path | None,
+    typer.Option(
+        help="The logs are ROS 2 bags: read them through this topic map "
+        "(schemas/topic_map.schema.json).",
+        dir_okay=False,
+    ),
+]
+"""``--topics MAP``, shared by compile, doctor and inspect."""
+
+
 @app.command()
 def scenes() -> None:
     """List the built-in scenes and their objects."""
@@ -187,14 +198,7 @@ def compile_cmd(
             "--set", help="Override a parameter: KEY=VALUE (e.g. t_hp=0.12, dmp.n_basis=50)."
         ),
     ] = None,
-    topics: Annotated[
-        Path | None,
-        typer.Option(
-            help="The logs are ROS 2 bags: read them through this topic map "
-            "(schemas/topic_map.schema.json).",
-            dir_okay=False,
-        ),
-    ] = None,
+    topics: TopicsOption = None,
 ) -> None:
     """Segment logs, extract SMCs and merge them into a versioned tree.json."""
     from smccli.learn.compile import compile_logs
@@ -424,14 +428,7 @@ def inspect(
     serve: Annotated[bool, typer.Option(help="Serve Rerun's web viewer on 127.0.0.1.")] = False,
     port: Annotated[int, typer.Option(help="Web viewer port (with --serve).")] = 9090,
     force: Annotated[bool, typer.Option(help="Overwrite an existing --save file.")] = False,
-    topics: Annotated[
-        Path | None,
-        typer.Option(
-            help="The logs are ROS 2 bags: read them through this topic map "
-            "(schemas/topic_map.schema.json).",
-            dir_okay=False,
-        ),
-    ] = None,
+    topics: TopicsOption = None,
 ) -> None:
     """Show the tree and the traces in Rerun."""
     from smccli.inspect import recording as ins
@@ -473,14 +470,7 @@ def doctor(
         typer.Option(help="Write LOG's whole chunks as a valid, indexed MCAP (one LOG only)."),
     ] = None,
     force: Annotated[bool, typer.Option(help="Overwrite the --repair output.")] = False,
-    topics: Annotated[
-        Path | None,
-        typer.Option(
-            help="The logs are ROS 2 bags: read them through this topic map "
-            "(schemas/topic_map.schema.json).",
-            dir_okay=False,
-        ),
-    ] = None,
+    topics: TopicsOption = None,
 ) -> None:
     """Check logs before compiling: exit 0 healthy, 1 warnings, 2 a log compile would reject."""
     from smccli.learn import doctor as dr

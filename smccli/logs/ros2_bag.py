@@ -33,7 +33,7 @@ from scipy.spatial.transform import Rotation
 
 from smccli.errors import LogError, SceneError
 from smccli.logs import topics as tp
-from smccli.logs.reader import Log, PointCloudMsg, Scan
+from smccli.logs.reader import Log, PointCloudMsg, Scan, _unwrap_yaw
 from smccli.schemas import validate_yaml
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
@@ -254,7 +254,7 @@ def read_ros2_bag(
         commands=b.commands(),
         joint_states=b.joints,
         poi_t=np.array(b.poi_t, dtype=float),
-        poi=_unwrapped(np.array(b.poi, dtype=float).reshape(-1, 4)),
+        poi=_unwrap_yaw(np.array(b.poi, dtype=float).reshape(-1, 4)),
         frames=b.frames(),
         weight_t=np.array(b.weight_t, dtype=float),
         weight=np.array(b.weight, dtype=float),
@@ -267,12 +267,6 @@ def read_ros2_bag(
         point_clouds=b.clouds,
         end=metadata.get(tp.END_METADATA_NAME, {}),
     )
-
-
-def _unwrapped(poi: np.ndarray) -> np.ndarray:
-    if len(poi):
-        poi[:, 3] = np.unwrap(poi[:, 3])
-    return poi
 
 
 class _Builder:
@@ -344,20 +338,25 @@ class _Builder:
                 Scan(t, float(msg.angle_min), float(end), ranges, msg.header.frame_id)
             )
 
+    def _world(self, topic: str, header: Any) -> np.ndarray:
+        """T_world_frame of a message's ``header`` (frame and stamp); LogError without a
+        chain of transforms to the world frame."""
+        frame = header.frame_id or self.map.world_frame
+        W = self.tf.lookup(frame, _ns(header.stamp))
+        if W is None:
+            raise LogError(
+                f"{self.path}: {topic} at t={_ns(header.stamp) / 1e9:.3f} s: no transform "
+                f"from frame {frame!r} to {self.map.world_frame!r} in /tf or /tf_static"
+            )
+        return W
+
     def _pose(self, topic: str, msg: Any) -> np.ndarray:
         """A PoseStamped as ``[x, y, z, yaw]`` in the world frame."""
         p, q = msg.pose.position, msg.pose.orientation
         T = np.eye(4)
         T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
         T[:3, 3] = [p.x, p.y, p.z]
-        frame = msg.header.frame_id or self.map.world_frame
-        W = self.tf.lookup(frame, _ns(msg.header.stamp))
-        if W is None:
-            raise LogError(
-                f"{self.path}: {topic} at t={_ns(msg.header.stamp) / 1e9:.3f} s: no transform "
-                f"from frame {frame!r} to {self.map.world_frame!r} in /tf or /tf_static"
-            )
-        T = W @ T
+        T = self._world(topic, msg.header) @ T
         return np.array([*T[:3, 3], _yaw(T[:3, :3])])
 
     def _cloud(self, t: float, msg: Any) -> PointCloudMsg:
@@ -380,13 +379,7 @@ class _Builder:
         if "rgb" in fields:
             packed = column("rgb", "u4")[ok]
             colors = np.stack([(packed >> s) & 0xFF for s in (16, 8, 0)], axis=1).astype(np.uint8)
-        frame = msg.header.frame_id or self.map.world_frame
-        W = self.tf.lookup(frame, _ns(msg.header.stamp))
-        if W is None:
-            raise LogError(
-                f"{self.path}: {topic}: no transform from frame {frame!r} to "
-                f"{self.map.world_frame!r} in /tf or /tf_static"
-            )
+        W = self._world(topic, msg.header)
         pts = (xyz[ok] @ W[:3, :3].T + W[:3, 3]).astype(np.float32)
         return PointCloudMsg(t, pts, colors, self.map.world_frame)
 
