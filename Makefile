@@ -39,7 +39,7 @@ system-deps:
 	fi
 
 test: setup
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --durations=15
 
 # The suite beside two CPU burners (this machine has 2 cores): no test may depend on the
 # machine's speed. The burners are bounded (timeout) and stopped when the suite ends.
@@ -50,7 +50,7 @@ test-under-load: setup
 	timeout $(BURN_S) $(PY) -c "while True: pass" & b2=$$!; \
 	trap 'kill $$b1 $$b2 2>/dev/null || true' EXIT; \
 	echo "two CPU burners running (pids $$b1 $$b2, at most $(BURN_S) s)"; \
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --durations=15
 
 test-fast: setup
 	$(PY) -m pytest -q -m "not slow"

@@ -21,6 +21,13 @@ from smccli.record.session import RecordConfig, record
 pytestmark = pytest.mark.slow
 
 
+N_BENCH = 12
+"""bench_pick demonstrations, each from its own random layout (the README's compile figure
+has 100; 12 keep `make test` within its budget and still span the white box's ranges)."""
+N_PAIRS = 6
+"""weigh_sort light/heavy pairs, each demonstration from its own random layout."""
+
+
 def _record(root: Path, scene: str, script: str, seeds: range) -> list[Path]:
     out = []
     for seed in seeds:
@@ -42,9 +49,9 @@ def _record(root: Path, scene: str, script: str, seeds: range) -> list[Path]:
 def demos(tmp_path_factory) -> dict[str, list[Path]]:
     root = tmp_path_factory.mktemp("layouts")
     return {
-        "bench_pick": _record(root, "bench_pick", "demo.yaml", range(1, 21)),
-        "light": _record(root, "weigh_sort", "demo_light.yaml", range(1, 11)),
-        "heavy": _record(root, "weigh_sort", "demo_heavy.yaml", range(1, 11)),
+        "bench_pick": _record(root, "bench_pick", "demo.yaml", range(1, N_BENCH + 1)),
+        "light": _record(root, "weigh_sort", "demo_light.yaml", range(1, N_PAIRS + 1)),
+        "heavy": _record(root, "weigh_sort", "demo_heavy.yaml", range(1, N_PAIRS + 1)),
         "cube": _record(root, "pick_place", "demo1.yaml", range(1, 4)),
         "pyramid": _record(root, "pick_place", "demo2.yaml", range(1, 4)),
     }
@@ -72,12 +79,12 @@ def supports(tree: Tree) -> list:
     return sub(ROOT)
 
 
-def test_bench_pick_from_20_layouts_is_one_chain(demos, tmp_path):
+def test_bench_pick_from_many_layouts_is_one_chain(demos, tmp_path):
     logs = demos["bench_pick"]
     _assert_layouts_differ(logs, "white_box")
     tree = compile_logs(logs, tmp_path / "tree.json").tree
     assert shape(tree) == BENCH_PICK
-    assert supports(tree) == [(20, [(20, [])])]
+    assert supports(tree) == [(N_BENCH, [(N_BENCH, [])])]
 
 
 def test_each_weigh_sort_pair_is_the_papers_tree(demos, tmp_path):
@@ -94,10 +101,11 @@ def weigh_sort_tree(demos, tmp_path_factory) -> Path:
     return path
 
 
-def test_twenty_weigh_sort_demos_share_their_first_smcs(weigh_sort_tree):
+def test_weigh_sort_demos_from_many_layouts_share_their_first_smcs(weigh_sort_tree):
     tree = load_tree(weigh_sort_tree)
     assert shape(tree) == WEIGH_SORT
-    assert supports(tree) == [(20, [(20, [(10, [(10, [])]), (10, [(10, [])])])])]
+    n, k = 2 * N_PAIRS, N_PAIRS
+    assert supports(tree) == [(n, [(n, [(k, [(k, [])]), (k, [(k, [])])])])]
     grasp = tree.children(ROOT)[0]
     weighed = tree.children(tree.children(grasp.child)[0].child)
     weights = sorted(e.smc.perception.weight for e in weighed)
@@ -105,8 +113,8 @@ def test_twenty_weigh_sort_demos_share_their_first_smcs(weigh_sort_tree):
 
 
 def test_weigh_sort_campaign_on_the_merged_tree(weigh_sort_tree):
-    s = cp.run_campaign(weigh_sort_tree, trials=100, seed=11, workers=2)
-    assert s["success_rate"] >= 0.99, s["failures"]
+    s = cp.run_campaign(weigh_sort_tree, trials=50, seed=11, workers=2)
+    assert s["successes"] >= 49, s["failures"]
 
 
 def test_pick_place_demos_merge_per_task_and_branch_at_the_root(demos, tmp_path):
