@@ -289,21 +289,22 @@ class Observation:
     [m, m, rad]. Needed with ``scan``: it maps a goal stored relative to the taught scan."""
 
     def __post_init__(self) -> None:
-        poi = np.asarray(self.poi, dtype=np.float64)
-        if poi.shape != (4,) or not np.all(np.isfinite(poi)):
-            raise SmcError(
-                f"observation at t={self.t:.3f} s: poi must be 4 finite numbers "
-                f"[x, y, z, yaw], got {np.asarray(self.poi).tolist()}"
-            )
-        object.__setattr__(self, "poi", poi)
+        self._vector("poi", "[x, y, z, yaw]")
         if self.lidar_pose is not None:
-            lp = np.asarray(self.lidar_pose, dtype=np.float64)
-            if lp.shape != (3,) or not np.all(np.isfinite(lp)):
-                raise SmcError(
-                    f"observation at t={self.t:.3f} s: lidar_pose must be 3 finite numbers "
-                    f"[x, y, yaw], got {np.asarray(self.lidar_pose).tolist()}"
-                )
-            object.__setattr__(self, "lidar_pose", lp)
+            self._vector("lidar_pose", "[x, y, yaw]")
+
+    def _vector(self, name: str, form: str) -> None:
+        """Store field ``name`` as float64, or SmcError unless it holds ``form``'s finite
+        numbers."""
+        raw = getattr(self, name)
+        v = np.asarray(raw, dtype=np.float64)
+        n = form.count(",") + 1
+        if v.shape != (n,) or not np.all(np.isfinite(v)):
+            raise SmcError(
+                f"observation at t={self.t:.3f} s: {name} must be {n} finite numbers "
+                f"{form}, got {np.asarray(raw).tolist()}"
+            )
+        object.__setattr__(self, name, v)
 
 
 @dataclass(frozen=True, eq=False)
