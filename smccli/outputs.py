@@ -8,8 +8,10 @@ where a good one was.
 
 from __future__ import annotations
 
+import fcntl
 import os
 import tempfile
+import time
 from pathlib import Path
 
 from smccli.errors import OutputError, OutputExistsError
@@ -66,3 +68,51 @@ def write_atomic(path: str | os.PathLike[str], data: str | bytes) -> Path:
         Path(tmp).unlink(missing_ok=True)
         raise
     return p
+
+
+class ExclusiveLock:
+    """An exclusive lock on a file created for it and removed when released (flock(2)).
+
+    By hand rather than filelock: its Unix lock leaves the file behind, and removing a lock
+    file on release is only safe when every locker checks, once it holds the lock, that the
+    path still names the file it locked (else a waiter on the removed file and a newcomer
+    on a new one would both "hold" it).
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+        self._fd: int | None = None
+
+    def acquire(self, timeout: float) -> None:
+        """Block until held; TimeoutError after ``timeout`` s."""
+        deadline = time.monotonic() + timeout
+        while True:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                while True:
+                    try:
+                        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                        break
+                    except BlockingIOError:
+                        if time.monotonic() > deadline:
+                            raise TimeoutError(f"{self.path}: held by another process") from None
+                        time.sleep(0.05)
+                try:
+                    same = os.stat(self.path).st_ino == os.fstat(fd).st_ino
+                except FileNotFoundError:
+                    same = False
+            except BaseException:
+                os.close(fd)
+                raise
+            if same:
+                self._fd = fd
+                return
+            os.close(fd)  # the holder before us removed it: lock the new file
+
+    def release(self) -> None:
+        """Remove the file, then let go (a waiter on it retries on a fresh file)."""
+        if self._fd is None:
+            return
+        self.path.unlink(missing_ok=True)
+        os.close(self._fd)
+        self._fd = None

@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from filelock import FileLock
+from smccli.outputs import ExclusiveLock
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -40,11 +40,15 @@ def build(
 
     names = names or DEMOS[scene]
     root.mkdir(parents=True, exist_ok=True)
-    with FileLock(str(root / f"{scene}.lock")):
+    lock = ExclusiveLock(root / f"{scene}.lock")
+    lock.acquire(timeout=1800)  # another test process may be recording the same demos
+    try:
         logs = [record_demo(scene, n, root / f"{scene}_{n}.mcap") for n in names]
         tree = root / f"{scene}{tag}_{'_'.join(names)}.json"
         if not tree.exists():
             compile_logs(logs, tree)
+    finally:
+        lock.release()
     return logs, tree
 
 

@@ -270,3 +270,4 @@ def test_concurrent_compiles_serialise_on_the_lock(sample_logs, reseeded_logs, t
     tree = load_tree(out)
     assert tree.version == 2 and tree.edges[0].support == 2
     assert not (tmp_path / "tree.json.part").exists()
+    assert not (tmp_path / "tree.json.lock").exists(), "a finished compile leaves no lock"

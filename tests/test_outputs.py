@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import os
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 from conftest import SAMPLE_LOGS, sha256, smc
 
 from smccli.errors import OutputError, OutputExistsError
-from smccli.outputs import check_output, write_atomic
+from smccli.outputs import ExclusiveLock, check_output, write_atomic
 
 LOG = SAMPLE_LOGS / "bench_pick" / "demo.mcap"
 SCRIPT = SAMPLE_LOGS / "bench_pick" / "demo.yaml"
@@ -122,3 +123,53 @@ def test_write_atomic_replaces_whole_or_not_at_all(tmp_path):
         write_atomic(target, 42)  # type: ignore[arg-type]
     assert target.read_text() == "new\n"
     assert [p.name for p in tmp_path.iterdir()] == ["report.json"]  # no temp file left
+
+
+_COUNTER = """
+import sys
+from pathlib import Path
+from smccli.outputs import ExclusiveLock
+lock, counter, n = ExclusiveLock(sys.argv[1]), Path(sys.argv[2]), int(sys.argv[3])
+for _ in range(n):
+    lock.acquire(timeout=120)
+    counter.write_text(str(int(counter.read_text()) + 1))
+    lock.release()
+"""
+
+
+def test_exclusive_lock_excludes_and_leaves_no_file(tmp_path):
+    """Three processes add 1 to a counter 150 times each under the lock: no update lost,
+    though every release removes the lock file (a locker that got a removed file retries)."""
+    lock, counter = tmp_path / "c.lock", tmp_path / "c.txt"
+    counter.write_text("0")
+    procs = [
+        subprocess.Popen([sys.executable, "-c", _COUNTER, str(lock), str(counter), "150"])
+        for _ in range(3)
+    ]
+    assert [p.wait(timeout=300) for p in procs] == [0, 0, 0]
+    assert counter.read_text() == "450"
+    assert not lock.exists()
+
+
+def test_exclusive_lock_times_out_while_held(tmp_path):
+    held = ExclusiveLock(tmp_path / "t.lock")
+    held.acquire(timeout=1)
+    holder = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import sys; from smccli.outputs import ExclusiveLock as L\n"
+            "try:\n    L(sys.argv[1]).acquire(timeout=0.3)\n"
+            "except TimeoutError as e:\n    print(e); sys.exit(3)",
+            str(tmp_path / "t.lock"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert holder.returncode == 3 and "t.lock" in holder.stdout
+    held.release()
+    assert not (tmp_path / "t.lock").exists()
+    again = ExclusiveLock(tmp_path / "t.lock")
+    again.acquire(timeout=1)
+    again.release()

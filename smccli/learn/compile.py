@@ -15,7 +15,6 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from filelock import FileLock, Timeout
 
 from smccli import __version__
 from smccli.errors import LogError, TreeError
@@ -33,7 +32,7 @@ from smccli.learn.tree import FORMAT, Tree, insert_chain, load_tree, save_tree
 from smccli.logs import Log, read_log
 from smccli.logs.robot import geometry_at, robot_model_of
 from smccli.logs.ros2_bag import TopicMap, read_ros2_bag
-from smccli.outputs import check_output
+from smccli.outputs import ExclusiveLock, check_output
 from smccli.perception import Cluster, clusters_from_frame, salient_cluster, scale_reading
 from smccli.perception.room import room_histogram
 from smccli.perception.scan import Scan2D, pose_compose
@@ -340,10 +339,10 @@ def compile_logs(
     # before reading any log is that it can be written at all.
     out = check_output(out, force=True)
     warn = on_warning or (lambda msg: None)
-    lock = FileLock(str(out) + ".lock")
+    lock = ExclusiveLock(f"{out}.lock")
     try:
         lock.acquire(timeout=60)
-    except Timeout:
+    except TimeoutError:
         raise TreeError(f"{out}: locked by another compile ({out}.lock)") from None
     try:
         if out.exists() and not rebuild:
