@@ -427,6 +427,10 @@ def inspect(
     spawn: Annotated[bool, typer.Option(help="Open Rerun's native viewer.")] = False,
     serve: Annotated[bool, typer.Option(help="Serve Rerun's web viewer on 127.0.0.1.")] = False,
     port: Annotated[int, typer.Option(help="Web viewer port (with --serve).")] = 9090,
+    grpc_port: Annotated[
+        int | None,
+        typer.Option(help="Data (gRPC) port the page reads from (with --serve; default: free)."),
+    ] = None,
     force: Annotated[bool, typer.Option(help="Overwrite an existing --save file.")] = False,
     topics: TopicsOption = None,
 ) -> None:
@@ -438,6 +442,8 @@ def inspect(
 
     if sum([save is not None, spawn, serve]) > 1:
         raise SmcError("choose one of --save, --spawn, --serve")
+    if grpc_port is not None and not serve:
+        raise SmcError("--grpc-port goes with --serve")
     if not (spawn or serve) and save is None:
         save = tree.with_suffix(".rrd")
     result = ins.inspect(
@@ -447,6 +453,7 @@ def inspect(
         spawn=spawn,
         serve=serve,
         port=port,
+        grpc_port=grpc_port,
         force=force,
         on_warning=lambda m: err.print(f"[yellow]warning:[/] {escape(m)}"),
         on_message=lambda m: out.print(escape(m), highlight=False, soft_wrap=True),

@@ -206,18 +206,37 @@ def _instances(entity: dict, column: str) -> list:
 def _check_tree(rec: dict, tree_path: Path) -> None:
     tree = load_tree(tree_path)
     assert {"GraphNodes", "GraphEdges"} <= rec["/tree"]["archetypes"]
-    assert sorted(_instances(rec["/tree"], "GraphNodes:node_ids")) == sorted(tree.nodes)
+    ids = _instances(rec["/tree"], "GraphNodes:node_ids")
+    texts = dict(zip(ids, _instances(rec["/tree"], "GraphNodes:labels"), strict=True))
+    colours = dict(zip(ids, _instances(rec["/tree"], "GraphNodes:colors"), strict=True))
+    # Decision points, then per SMC a label and a colour swatch, all in one entity.
+    edge_ids = [e.id for e in tree.edges]
+    assert sorted(ids) == sorted([*tree.nodes, *edge_ids, *(f"{e} colour" for e in edge_ids)])
     edges = _instances(rec["/tree"], "GraphEdges:edges")
     assert len(edges) == len(tree.edges)
-    # One label node per SMC, with its perception, gripper event, support and sources.
-    labels = _instances(rec["/tree/labels"], "GraphNodes:labels")
-    assert len(labels) == len(tree.edges)
-    for e, text in zip(tree.edges, labels, strict=True):
+    # Text in one neutral grey (it takes the node's colour): readable on both themes.
+    assert len({colours[n] for n in [*tree.nodes, *edge_ids]}) == 1
+    for e in tree.edges:
+        text = texts[e.id]
         assert text.startswith(f"{e.id}:")
         assert e.smc.action.event in text and f"support {e.support}" in text
         assert e.sources[0].log in text
         if e.smc.perception.cluster is not None:
             assert "object" in text
+            rgb = dominant_rgb(e.smc.perception.cluster.histogram)
+            packed = (rgb[0] << 24) | (rgb[1] << 16) | (rgb[2] << 8) | 0xFF
+            assert colours[f"{e.id} colour"] == packed, "the swatch has the object's colour"
+    # The layout keeps labels apart: no two label boxes overlap.
+    from smccli.inspect.views import graph_layout, text_size
+
+    layout = graph_layout(tree, {e.id: texts[e.id] for e in tree.edges})
+    boxes = [(layout.labels[e.id], text_size(texts[e.id])) for e in tree.edges]
+    for i, ((x1, y1), (w1, h1)) in enumerate(boxes):
+        for (x2, y2), (w2, h2) in boxes[i + 1 :]:
+            assert abs(x1 - x2) >= (w1 + w2) / 2 or abs(y1 - y2) >= (h1 + h2) / 2
+    (x0, x1), (y0, y1) = layout.bounds
+    for x, y in [*layout.nodes.values(), *layout.labels.values(), *layout.swatches.values()]:
+        assert x0 < x < x1 and y0 < y < y1, "the view opens on the whole tree"
     for e in tree.edges:
         assert rec[f"/world/actions/{e.id}"]["archetypes"] == {"LineStrips3D"}
         assert "Points3D" in rec[f"/world/actions/{e.id}/goal"]["archetypes"]
@@ -252,6 +271,7 @@ def test_demos_and_replay_each_get_a_recording(inputs, tmp_path):
         assert rec["/world/camera/image"]["rows"] == len(log.frames)
         assert "DepthImage" in rec["/world/camera/depth"]["archetypes"]
         assert {"Pinhole", "Transform3D"} <= rec["/world/camera"]["archetypes"]
+        _check_robot(rec, log)
         # One event per saliency mark.
         if log.marks:
             assert rec["/events/saliency"]["archetypes"] == {"TextLog"}
@@ -278,6 +298,28 @@ def test_demos_and_replay_each_get_a_recording(inputs, tmp_path):
         else:
             assert "/events/decisions" not in rec
             assert rec["/events/fragments"]["rows"] == n_points
+
+
+def _check_robot(rec: dict, log) -> None:
+    """Every moving body of the robot posed over time (at most RATE Hz), drawn from its
+    geoms; the fingers end where the POI ends."""
+    from smccli.inspect.robot_view import RATE
+    from smccli.logs.robot import robot_model_of
+
+    model = robot_model_of(log)
+    duration = log.joint_states[-1].t - log.joint_states[0].t
+    for b in model.bodies:
+        name = model.model.body(int(b)).name
+        ent = rec[f"/world/robot/{name}"]
+        assert "Transform3D" in ent["archetypes"]
+        assert 0.8 * duration * RATE <= ent["rows"] <= duration * RATE + 2
+    shapes = set().union(
+        *(e["archetypes"] for path, e in rec.items() if path.startswith("/world/robot/"))
+    )
+    assert shapes & {"Boxes3D", "Capsules3D", "Cylinders3D", "Ellipsoids3D", "Mesh3D"}
+    fingers = [p for p in rec if p.startswith("/world/robot/finger") and p.count("/") == 3]
+    last = np.array(rec[fingers[0]]["columns"]["Transform3D:translation"][-1]).reshape(-1)
+    assert np.linalg.norm(last - log.poi[-1, :3]) < 0.12
 
 
 def test_weight_is_a_signal(inputs, tmp_path):
@@ -455,11 +497,3 @@ def test_library_errors_are_typed(inputs, tmp_path):
     with pytest.raises(SmcError, match="exactly one"):
         inspect(inputs.tree, [], save=tmp_path / "x.rrd", serve=True)
     assert not (tmp_path / "x.rrd").exists()
-
-
-def test_previews_render_headless(inputs, tmp_path):
-    from smccli.inspect.recording import save_previews
-
-    files = save_previews(load_tree(inputs.tree), read_log(inputs.demos[0]), tmp_path)
-    assert [f.name for f in files] == ["tree.png", "world.png", "camera.png", "signals.png"]
-    assert all(f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for f in files)

@@ -217,8 +217,14 @@ def test_replay_decisions(inspected):
 def test_tree_scans_goals_and_labels(inspected, rid):
     rec = inspected.tree_only if rid is None else inspected.rrd[rid]
     tree = inspected.tree
-    labels = _instances(rec["/tree/labels"], "GraphNodes:labels")
-    assert len(labels) == len(tree.edges)
+    text = dict(
+        zip(
+            _instances(rec["/tree"], "GraphNodes:node_ids"),
+            _instances(rec["/tree"], "GraphNodes:labels"),
+            strict=True,
+        )
+    )
+    labels = [text[e.id] for e in tree.edges]
     n_scan = 0
     for e, label in zip(tree.edges, labels, strict=True):
         p, a = e.smc.perception, e.smc.action

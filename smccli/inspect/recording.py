@@ -64,13 +64,21 @@ from typing import Any
 import numpy as np
 
 from smccli.errors import LogError, SmcError
+from smccli.inspect.robot_view import log_robot
+from smccli.inspect.views import (
+    TIMELINE,
+    Framing,
+    blueprint,
+    floor_framing,
+    graph_layout,
+    workspace_framing,
+)
 from smccli.learn.tree import ROOT, Edge, Tree, load_tree
 from smccli.logs.ros2_bag import TopicMap
 from smccli.outputs import check_output
 from smccli.perception.colours import colour_name, dominant_rgb
 
 APP_ID = "smc"
-TIMELINE = "time"
 MAX_CLOUD_POINTS = 40_000
 """Point clouds are subsampled to at most this many points (viewer and file size)."""
 MAX_SCAN_POINTS = 100_000
@@ -90,8 +98,12 @@ _PALETTE = [
     (23, 190, 207),
 ]
 _HIGHLIGHT = (255, 215, 0)
-_NODE = (90, 90, 90)
-_ROOT = (20, 20, 20)
+_TEXT = (118, 118, 118)
+"""Graph text: contrast about 4.5:1 on both the light and the dark theme."""
+_SWATCH = "\u25a0"
+"""A swatch in the graph: a square in the object's colour."""
+_PATH = (128, 128, 128)
+"""The path a log took (neutral: the branch colours are the demonstrated actions')."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -119,6 +131,7 @@ def inspect(
     spawn: bool = False,
     serve: bool = False,
     port: int = 9090,
+    grpc_port: int | None = None,
     force: bool = False,
     on_warning: Callable[[str], None] | None = None,
     on_message: Callable[[str], None] | None = None,
@@ -130,8 +143,8 @@ def inspect(
     The output is checked first (its folder exists and is writable; an existing file needs
     ``force``), then inputs are all read and checked: a missing or corrupt tree or log raises
     TreeError / LogError (one line naming the file) before anything is written.
-    ``serve`` blocks until Ctrl-C, then stops the viewer it started; ``on_message`` hears
-    the address it serves at.
+    ``serve`` blocks until Ctrl-C, then stops the viewer it started (see :func:`serve_recordings`);
+    ``on_message`` hears the addresses it serves at.
     """
     if sum([save is not None, spawn, serve]) != 1:
         raise SmcError("inspect: choose exactly one of --save, --spawn, --serve")
@@ -155,11 +168,17 @@ def inspect(
         for p in logs
     ]
     if serve:
-        with tempfile.TemporaryDirectory(prefix="smc-inspect-") as tmp:
-            rrd = Path(tmp) / "inspect.rrd"
-            ids = write_rrd(tree, loaded, rrd, tree_name=Path(tree_path).name, warn=warn)
-            serve_rrd(rrd, port=port, on_message=on_message)
-        return InspectResult(tuple(ids), None, f"http://127.0.0.1:{port}", tuple(warnings))
+        addresses = serve_recordings(
+            tree,
+            loaded,
+            port=port,
+            grpc_port=grpc_port,
+            tree_name=Path(tree_path).name,
+            warn=warn,
+            on_message=on_message,
+        )
+        ids = [rid for rid, _ in _recording_plan(tree, loaded, Path(tree_path).name)]
+        return InspectResult(tuple(ids), None, addresses.viewer, tuple(warnings))
     if spawn:
         ids = spawn_viewer(tree, loaded, tree_name=Path(tree_path).name, warn=warn)
         return InspectResult(tuple(ids), None, None, tuple(warnings))
@@ -184,6 +203,36 @@ def _recording_plan(tree: Tree, logs: Sequence[Any], tree_name: str) -> list[tup
     return plan
 
 
+def _blueprint_for(tree: Tree, logs: Sequence[Any]) -> Any:
+    """The blueprint with the graph fitted to this tree and the 3D view on its workspace."""
+    labels = {e.id: edge_label(e, tree) for e in tree.edges}
+    return blueprint(
+        mobile=_is_mobile(tree, logs),
+        graph=graph_layout(tree, labels),
+        framing=framing(tree, logs),
+    )
+
+
+def framing(tree: Tree, logs: Sequence[Any]) -> Framing:
+    """Where the 3D view opens: an arm's perception crop (the workspace), a mobile base's
+    rooms (from the first log's scene, else the tree's), else the paths the logs took."""
+    if _is_mobile(tree, logs):
+        mobile = mobile_view(tree, logs[0] if logs else None)
+        rects = [r for _, rs in (mobile.regions if mobile else ()) for r in rs]
+        if rects:
+            r = np.array(rects)
+            return floor_framing(
+                np.array([r[:, 0].min(), r[:, 2].min()]), np.array([r[:, 1].max(), r[:, 3].max()])
+            )
+        paths = [log.poi[:, :2] for log in logs if len(log.poi_t)]
+        if paths:
+            xy = np.concatenate(paths)
+            return floor_framing(xy.min(axis=0) - 1.0, xy.max(axis=0) + 1.0)
+        return floor_framing(np.array([-3.0, -3.0]), np.array([3.0, 3.0]))
+    p = tree.params.perception
+    return workspace_framing(np.array(p.crop_min), np.array(p.crop_max))
+
+
 def _fill(rec: Any, tree: Tree, log: Any, warn: Callable[[str], None]) -> None:
     mobile = mobile_view(tree, log, warn)
     log_tree(rec, tree, mobile=mobile)
@@ -204,7 +253,7 @@ def write_rrd(
 
     out = check_output(out, force=True)  # overwriting was the caller's decision
     plan = _recording_plan(tree, logs, tree_name)
-    bp = blueprint(mobile=_is_mobile(tree, logs))
+    bp = _blueprint_for(tree, logs)
     with tempfile.TemporaryDirectory(prefix="smc-rrd-", dir=out.parent) as tmp:
         parts = []
         for k, (rid, log) in enumerate(plan):
@@ -245,7 +294,7 @@ def spawn_viewer(
     import rerun as rr
 
     plan = _recording_plan(tree, logs, tree_name)
-    bp = blueprint(mobile=_is_mobile(tree, logs))
+    bp = _blueprint_for(tree, logs)
     for rid, log in plan:
         rec = rr.RecordingStream(APP_ID, recording_id=rid)
         try:
@@ -309,24 +358,54 @@ def _stop(proc: subprocess.Popen[bytes]) -> None:
             continue
 
 
-def serve_rrd(
-    rrd: Path,
+@dataclass(frozen=True, slots=True)
+class Addresses:
+    """Where ``--serve`` serves (both on 127.0.0.1)."""
+
+    viewer: str
+    """The web viewer's page, with the data address in its query: open this."""
+    data: str
+    """The gRPC proxy the page reads the recordings from (forward its port too)."""
+
+
+def serve_recordings(
+    tree: Tree,
+    logs: Sequence[Any],
     *,
     port: int,
+    grpc_port: int | None = None,
+    tree_name: str = "tree.json",
+    warn: Callable[[str], None] = lambda m: None,
     on_message: Callable[[str], None] | None = None,
-    ready_timeout: float = 30.0,
+    ready_timeout: float = 60.0,
     until: Callable[[], bool] | None = None,
-) -> str:
-    """Serve ``rrd`` with Rerun's web viewer on 127.0.0.1:``port`` until Ctrl-C (or ``until()``).
+) -> Addresses:
+    """Serve the recordings with Rerun's web viewer on 127.0.0.1:``port`` (data on
+    ``grpc_port``, a free port if None) until Ctrl-C (or ``until()``).
 
-    Says the address (``on_message``); on Ctrl-C stops the viewer process (and its group)
-    it started.
+    The recordings are sent to the viewer's gRPC proxy one after the other, the first log's
+    last: the viewer selects each recording as it arrives, so the page opens on the first
+    log's (the tree's when there is no log), whatever the timing. ``on_message`` hears the
+    two addresses once everything is sent; on Ctrl-C the viewer process (and its group) is
+    stopped.
     """
-    if not 0 < port < 65536:
-        raise SmcError(f"--port {port}: expected 1-65535")
-    if _port_taken(port):
-        raise SmcError(f"--port {port}: 127.0.0.1:{port} is already in use")
-    grpc = _free_port()
+    import rerun as rr
+
+    for flag, p in (("--port", port), ("--grpc-port", grpc_port)):
+        if p is None:
+            continue
+        if not 0 < p < 65536:
+            raise SmcError(f"{flag} {p}: expected 1-65535")
+        if _port_taken(p):
+            raise SmcError(f"{flag} {p}: 127.0.0.1:{p} is already in use")
+    if grpc_port == port:
+        raise SmcError(f"--grpc-port {grpc_port}: the same as --port")
+    grpc = grpc_port if grpc_port is not None else _free_port()
+    addresses = Addresses(
+        viewer=f"http://127.0.0.1:{port}/?url="
+        + urllib.parse.quote(f"rerun+http://127.0.0.1:{grpc}/proxy", safe=""),
+        data=f"rerun+http://127.0.0.1:{grpc}/proxy",
+    )
     cmd = [
         rerun_binary(),
         "--serve-web",
@@ -336,95 +415,73 @@ def serve_rrd(
         str(grpc),
         "--web-viewer-port",
         str(port),
-        str(rrd),
     ]
-    log_path = Path(rrd).with_suffix(".viewer.log")
     # Ctrl-C must reach us: a shell's `cmd &` may start us with SIGINT ignored.
     old = signal.signal(signal.SIGINT, signal.default_int_handler)
-    with open(log_path, "wb") as viewer_log:
-        proc = subprocess.Popen(
-            cmd,
-            stdin=subprocess.DEVNULL,
-            stdout=viewer_log,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,
-        )
-        try:
-            url = f"http://127.0.0.1:{port}"
-            deadline = time.monotonic() + ready_timeout
-            while True:
-                if proc.poll() is not None:
-                    tail = log_path.read_text(errors="replace").strip().splitlines()
-                    raise SmcError(
-                        f"rerun web viewer exited with code {proc.returncode}"
-                        f" ({tail[-1] if tail else 'no output'})"
+    with tempfile.TemporaryDirectory(prefix="smc-serve-") as tmp:
+        log_path = Path(tmp) / "viewer.log"
+        with open(log_path, "wb") as viewer_log:
+            proc = subprocess.Popen(
+                cmd,
+                stdin=subprocess.DEVNULL,
+                stdout=viewer_log,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
+            try:
+                _wait_ready(proc, log_path, port, grpc, ready_timeout)
+                bp = _blueprint_for(tree, logs)
+                for rid, log in reversed(_recording_plan(tree, logs, tree_name)):
+                    rec = rr.RecordingStream(APP_ID, recording_id=rid)
+                    rec.connect_grpc(addresses.data, default_blueprint=bp)
+                    rec.send_recording_name(rid)
+                    _fill(rec, tree, log, warn)
+                    rec.flush()
+                    rec.disconnect()
+                if on_message is not None:
+                    on_message(f"viewer: {addresses.viewer}")
+                    on_message(f"data:   {addresses.data}")
+                    on_message(
+                        f"(over SSH: ssh -L {port}:127.0.0.1:{port} -L {grpc}:127.0.0.1:{grpc}"
+                        " HOST; Ctrl-C to stop)"
                     )
-                try:
-                    with urllib.request.urlopen(url, timeout=1.0):
-                        break
-                except OSError:
-                    if time.monotonic() > deadline:
-                        raise SmcError(
-                            f"rerun web viewer did not answer on {url} within {ready_timeout:.0f} s"
-                        ) from None
+                while proc.poll() is None and not (until is not None and until()):
                     time.sleep(0.2)
-            proxy = urllib.parse.quote(f"rerun+http://127.0.0.1:{grpc}/proxy", safe="")
-            full = f"{url}/?url={proxy}"
-            if on_message is not None:
-                on_message(f"serving the Rerun web viewer at {full}  (Ctrl-C to stop)")
-            while proc.poll() is None and not (until is not None and until()):
-                time.sleep(0.2)
-            if proc.returncode not in (None, 0):
-                raise SmcError(f"rerun web viewer exited with code {proc.returncode}")
-            return full
-        except KeyboardInterrupt:
-            if on_message is not None:
-                on_message("stopping the web viewer")
-            return f"http://127.0.0.1:{port}"
-        finally:
-            _stop(proc)
-            signal.signal(signal.SIGINT, old)
+                if proc.returncode not in (None, 0):
+                    raise SmcError(f"rerun web viewer exited with code {proc.returncode}")
+            except KeyboardInterrupt:
+                if on_message is not None:
+                    on_message("stopping the web viewer")
+            finally:
+                _stop(proc)
+                signal.signal(signal.SIGINT, old)
+    return addresses
 
 
-# --- blueprint ------------------------------------------------------------------------
-
-
-def blueprint(*, mobile: bool = False) -> Any:
-    """Graph and time series on the left, 3D world, camera, depth and events on the right;
-    ``mobile``: a tab with the room histograms next to the events."""
-    import rerun.blueprint as rrb
-
-    tabs = [
-        rrb.TextLogView(origin="/events", name="events"),
-        rrb.TextDocumentView(origin="/tree/smcs", name="SMCs"),
-    ]
-    if mobile:
-        tabs.append(rrb.BarChartView(origin="/signals/room_histogram", name="room histogram"))
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Vertical(
-                rrb.GraphView(origin="/tree", name="SMC tree"),
-                rrb.TimeSeriesView(origin="/signals", name="signals"),
-                row_shares=[3, 2],
-            ),
-            rrb.Vertical(
-                rrb.Spatial3DView(origin="/world", name="world"),
-                rrb.Horizontal(
-                    rrb.Spatial2DView(
-                        origin="/world/camera", contents="$origin/image", name="camera"
-                    ),
-                    rrb.Spatial2DView(
-                        origin="/world/camera", contents="$origin/depth", name="depth"
-                    ),
-                    rrb.Tabs(*tabs),
-                ),
-                row_shares=[3, 2],
-            ),
-            column_shares=[2, 3],
-        ),
-        rrb.TimePanel(timeline=TIMELINE),
-        collapse_panels=False,
-    )
+def _wait_ready(
+    proc: subprocess.Popen[bytes], log_path: Path, port: int, grpc: int, timeout: float
+) -> None:
+    """Wait until the viewer's page answers and its gRPC port accepts connections."""
+    url = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + timeout
+    while True:
+        if proc.poll() is not None:
+            tail = log_path.read_text(errors="replace").strip().splitlines()
+            raise SmcError(
+                f"rerun web viewer exited with code {proc.returncode}"
+                f" ({tail[-1] if tail else 'no output'})"
+            )
+        try:
+            with urllib.request.urlopen(url, timeout=1.0):
+                pass
+            with socket.create_connection(("127.0.0.1", grpc), timeout=1.0):
+                return
+        except OSError:
+            if time.monotonic() > deadline:
+                raise SmcError(
+                    f"rerun web viewer did not answer on {url} within {timeout:.0f} s"
+                ) from None
+            time.sleep(0.2)
 
 
 # --- colours and labels -----------------------------------------------------------------
@@ -437,6 +494,16 @@ def _cluster_rgb(cluster: Any, tree: Tree) -> tuple[int, int, int]:
 
 def _cluster_name(cluster: Any, tree: Tree) -> str:
     return colour_name(_cluster_rgb(cluster, tree))
+
+
+def _swatch_rgb(edge: Edge, tree: Tree, fallback: tuple[int, int, int]) -> tuple[int, int, int]:
+    """An SMC's colour in the graph: its salient object's, else its room's, else its branch's."""
+    p = edge.smc.perception
+    if p.cluster is not None:
+        return _cluster_rgb(p.cluster, tree)
+    if p.room is not None:
+        return _hist_rgb(p.room, tree)
+    return fallback
 
 
 def _hist_rgb(histogram: Any, tree: Tree) -> tuple[int, int, int]:
@@ -476,7 +543,7 @@ def edge_label(edge: Edge, tree: Tree) -> str:
     """Graph label of an SMC: id, salient perceptions, gripper event, support, sources."""
     return (
         f"{edge.id}: {perception_text(edge, tree)}\n{edge.smc.action.event} · "
-        f"support {edge.support}\n{_sources_text(edge)}"
+        f"support {edge.support}\n{_sources_text(edge, 1)}"
     )
 
 
@@ -499,30 +566,6 @@ def branch_colours(tree: Tree) -> dict[str, tuple[int, int, int]]:
     for e in tree.edges:  # unreachable edges (should not exist): still coloured
         out.setdefault(e.id, _PALETTE[7])
     return out
-
-
-def _layout(tree: Tree) -> dict[str, tuple[float, float]]:
-    """Tidy tree layout: depth down, leaves spread left to right [graph-view units]."""
-    pos: dict[str, tuple[float, float]] = {}
-    next_x = [0.0]
-
-    def place(node: str, depth: int) -> float:
-        kids = tree.children(node)
-        if not kids:
-            x = next_x[0]
-            next_x[0] += 260.0
-        else:
-            xs = [place(e.child, depth + 1) for e in kids]
-            x = (min(xs) + max(xs)) / 2
-        pos[node] = (x, 160.0 * depth)
-        return x
-
-    place(ROOT, 0)
-    for n in tree.nodes:  # nodes not under the root
-        if n not in pos:
-            pos[n] = (next_x[0], 0.0)
-            next_x[0] += 260.0
-    return pos
 
 
 # --- a mobile base ------------------------------------------------------------------------
@@ -904,54 +947,29 @@ def log_tree(rec: Any, tree: Tree, *, mobile: MobileView | None = None) -> None:
 
     from smccli.learn.dmp import rollout
 
-    pos = _layout(tree)
     colours = branch_colours(tree)
-    depth_of = {ROOT: 0}
-    for e in tree.edges:
-        depth_of.setdefault(e.child, depth_of.get(e.parent, 0) + 1)
+    labels = {e.id: edge_label(e, tree) for e in tree.edges}
+    layout = graph_layout(tree, labels)
     rec.log("/world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    rec.log(
-        "/tree",
-        rr.GraphNodes(
-            list(tree.nodes),
-            positions=[pos[n] for n in tree.nodes],
-            labels=[f"{n} (root)" if n == ROOT else n for n in tree.nodes],
-            colors=[_ROOT if n == ROOT else _NODE for n in tree.nodes],
-            radii=12.0,
-        ),
-        static=True,
-    )
+    # Text takes its node's colour in Rerun's graph view: one neutral grey that reads on
+    # the light and the dark theme; the object's colour goes to a swatch (a coloured
+    # square, itself a labelled node) left of the label. One entity: the graph view draws
+    # a titled frame around each entity's nodes.
+    ids = [*tree.nodes]
+    texts = [f"{n} (root)" if n == ROOT else n for n in tree.nodes]
+    rgb = [_TEXT] * len(tree.nodes)
+    where = [layout.nodes[n] for n in tree.nodes]
+    for e in tree.edges:
+        ids += [e.id, f"{e.id} colour"]
+        texts += [labels[e.id], _SWATCH]
+        rgb += [_TEXT, _swatch_rgb(e, tree, colours[e.id])]
+        where += [layout.labels[e.id], layout.swatches[e.id]]
+    rec.log("/tree", rr.GraphNodes(ids, positions=where, labels=texts, colors=rgb), static=True)
     rec.log(
         "/tree",
         rr.GraphEdges([(e.parent, e.child) for e in tree.edges], graph_type="directed"),
         static=True,
     )
-    if tree.edges:
-        swatch = [
-            (
-                _cluster_rgb(e.smc.perception.cluster, tree)
-                if e.smc.perception.cluster is not None
-                else _hist_rgb(e.smc.perception.room, tree)
-                if e.smc.perception.room is not None
-                else colours[e.id]
-            )
-            for e in tree.edges
-        ]
-        mid = [
-            ((pos[e.parent][0] + pos[e.child][0]) / 2, (pos[e.parent][1] + pos[e.child][1]) / 2)
-            for e in tree.edges
-        ]
-        rec.log(
-            "/tree/labels",
-            rr.GraphNodes(
-                [e.id for e in tree.edges],
-                positions=mid,
-                colors=swatch,
-                labels=[edge_label(e, tree) for e in tree.edges],
-                radii=7.0,
-            ),
-            static=True,
-        )
     rows = [
         "| edge | parent → child | salient perceptions | event | goal | support | sources |",
         "|---|---|---|---|---|---|---|",
@@ -988,8 +1006,8 @@ def log_tree(rec: Any, tree: Tree, *, mobile: MobileView | None = None) -> None:
             rr.LineStrips3D(
                 [y[:, :3]],
                 colors=[colours[e.id]],
-                radii=0.003 if mobile is None else 0.01,
-                labels=[f"{e.id} ({e.smc.action.event})"],
+                radii=0.005 if mobile is None else 0.02,
+                labels=[e.id],
             ),
             static=True,
         )
@@ -1070,7 +1088,6 @@ def log_log(
 
     if mobile is None:
         mobile = mobile_view(tree, log, warn)
-    name = Path(log.path).name
     tcol = rr.TimeColumn
     # POI: path taken (static), moving point and coordinates over time.
     if len(log.poi_t):
@@ -1078,9 +1095,8 @@ def log_log(
             "/world/poi/path",
             rr.LineStrips3D(
                 [log.poi[:, :3]],
-                colors=[(240, 240, 240)],
-                radii=0.002 if mobile is None else 0.01,
-                labels=[f"{name}: path taken"],
+                colors=[_PATH],
+                radii=0.004 if mobile is None else 0.015,
             ),
             static=True,
         )
@@ -1122,6 +1138,7 @@ def log_log(
             columns=rr.Scalars.columns(scalars=[c.gripper for c in log.commands]),
         )
     _log_camera(rec, log)
+    log_robot(rec, log, warn)
     if mobile is not None:
         if len(log.poi_t):
             _log_base(rec, log, mobile)
@@ -1282,7 +1299,7 @@ def _log_decisions(
             rr.LineStrips3D(
                 [y[:, :3]],
                 colors=[colour],
-                radii=0.004 if mobile is None else 0.012,
+                radii=0.006 if mobile is None else 0.02,
                 labels=[f"{chosen} planned"],
             ),
         )
@@ -1357,112 +1374,3 @@ def _log_perception(
             )
             text = f"{label}: {len(clusters)} cluster(s), salient #{idx} {_cluster_name(c, tree)}"
         rec.log("/events/perception", rr.TextLog(text, level="DEBUG"))
-
-
-# --- headless previews (docs) -------------------------------------------------------------
-
-
-def save_previews(tree: Tree, log: Any | None, out_dir: Path) -> list[Path]:
-    """PNG renderings (matplotlib, no display) of the views the blueprint lays out, from the
-    same data as the recording: ``tree.png``, ``world.png`` and, with a log,
-    ``camera.png`` and ``signals.png``. For the docs; returns the files written."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from smccli.learn.dmp import rollout
-
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    written = []
-    pos, colours = _layout(tree), branch_colours(tree)
-    fig, ax = plt.subplots(figsize=(9, 6))
-    for e in tree.edges:
-        (x0, y0), (x1, y1) = pos[e.parent], pos[e.child]
-        ax.annotate(
-            "", (x1, -y1), (x0, -y0), arrowprops={"arrowstyle": "->", "lw": 1.5, "color": "0.4"}
-        )
-        c = e.smc.perception.cluster
-        sw = _cluster_rgb(c, tree) if c is not None else colours[e.id]
-        mx, my = (x0 + x1) / 2, -(y0 + y1) / 2
-        ax.scatter([mx], [my], s=120, color=np.array(sw) / 255, edgecolors="k", zorder=3)
-        ax.text(mx + 12, my, edge_label(e, tree), fontsize=7, va="center")
-    for n in tree.nodes:
-        x, y = pos[n]
-        ax.scatter([x], [-y], s=260, color=np.array(_ROOT if n == ROOT else _NODE) / 255, zorder=4)
-        ax.text(x, -y + 22, n, ha="center", fontsize=9, weight="bold")
-    ax.set_title("/tree: decision points and SMCs")
-    ax.axis("off")
-    ax.margins(0.25, 0.15)
-    written.append(out_dir / "tree.png")
-    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
-    plt.close(fig)
-
-    fig = plt.figure(figsize=(8, 6))
-    ax3 = fig.add_subplot(projection="3d")
-    for e in tree.edges:
-        dmp = e.smc.action.dmp
-        _, path = rollout(dmp, start=dmp.start, goal=dmp.goal)
-        ax3.plot(*path[:, :3].T, color=np.array(colours[e.id]) / 255, lw=2, label=e.id)
-        ax3.scatter(*dmp.goal[:3], color=np.array(colours[e.id]) / 255, s=25)
-        c = e.smc.perception.cluster
-        if c is not None:
-            ax3.scatter(
-                *c.centroid,
-                color=np.array(_cluster_rgb(c, tree)) / 255,
-                s=120,
-                marker="s",
-                edgecolors="k",
-            )
-    if log is not None and len(log.poi_t):
-        ax3.plot(*log.poi[:, :3].T, color="0.3", lw=1, ls="--", label="POI path taken")
-    ax3.set_xlabel("x [m]")
-    ax3.set_ylabel("y [m]")
-    ax3.set_zlabel("z [m]")
-    ax3.legend(fontsize=7, loc="upper left")
-    ax3.set_title("/world/actions/<edge> (coloured by branch) and /world/poi/path")
-    written.append(out_dir / "world.png")
-    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    if log is None:
-        return written
-
-    points = decision_points(log, tree)
-    if log.frames:
-        t0 = points[0][0] if points else log.frames[0].t
-        frame = _frame_at(log.frames, t0)
-        fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8))
-        a1.imshow(frame.rgb)
-        a1.set_title(f"/world/camera/image  t={frame.t:.2f} s")
-        d = np.where(np.isfinite(frame.depth) & (frame.depth > 0), frame.depth, np.nan)
-        im = a2.imshow(d, cmap="turbo")
-        fig.colorbar(im, ax=a2, label="depth [m]")
-        a2.set_title("/world/camera/depth")
-        for a in (a1, a2):
-            a.axis("off")
-        written.append(out_dir / "camera.png")
-        fig.savefig(written[-1], dpi=110, bbox_inches="tight")
-        plt.close(fig)
-
-    fig, axes = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
-    for i, axis in enumerate(("x", "y", "z")):
-        axes[0].plot(log.poi_t, log.poi[:, i], label=f"/signals/poi/{axis}")
-    if log.commands:
-        axes[1].plot(
-            [c.t for c in log.commands], [c.gripper for c in log.commands], label="/signals/gripper"
-        )
-    if len(log.weight_t):
-        axes[1].plot(log.weight_t, log.weight, label="/signals/weight [kg]")
-    for a in axes:
-        for m in log.marks:
-            a.axvline(m.t, color="goldenrod", ls="--", lw=1)
-        for d in log.decisions:
-            a.axvline(float(d["t"]), color="purple", ls=":", lw=1)
-        a.legend(fontsize=7, loc="upper right")
-    axes[0].set_title("/signals (dashed: /events/saliency marks, dotted: decisions)")
-    axes[1].set_xlabel("time [s]")
-    written.append(out_dir / "signals.png")
-    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    return written
