@@ -9,10 +9,11 @@ SMC := $(VENV)/bin/smc
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 # Debian packages: libusb for open3d, Mesa EGL for headless rendering, Xvfb + xdotool +
-# GLFW for the viewer test.
-DEB_PKGS := libusb-1.0-0 libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri libglfw3 xvfb xdotool
+# GLFW for the viewer test, Chromium for the web viewer test (Playwright drives it; it
+# downloads no browser of its own).
+DEB_PKGS := libusb-1.0-0 libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri libglfw3 xvfb xdotool chromium
 
-.PHONY: setup system-deps test test-fast test-under-load demo bench sample-logs lint clean
+.PHONY: setup system-deps test test-fast test-under-load demo bench sample-logs viewer-shots lint clean
 
 $(VENV)/.installed: pyproject.toml
 	@$(MAKE) --no-print-directory system-deps
@@ -60,6 +61,10 @@ demo: setup
 
 sample-logs: setup
 	$(PY) -m smccli.bench.sample_logs
+
+# The README's screenshots of `smc inspect --serve` in Chromium (docs/img/viewer_*.png).
+viewer-shots: setup
+	$(PY) -m smccli.bench.viewer
 
 bench: setup
 	$(PY) -m smccli.bench.record

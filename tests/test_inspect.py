@@ -497,3 +497,56 @@ def test_library_errors_are_typed(inputs, tmp_path):
     with pytest.raises(SmcError, match="exactly one"):
         inspect(inputs.tree, [], save=tmp_path / "x.rrd", serve=True)
     assert not (tmp_path / "x.rrd").exists()
+
+
+@pytest.mark.slow
+def test_web_viewer_draws_in_a_real_browser(inputs, tmp_path):
+    """`smc inspect --serve` opened in Chromium (Playwright, WebGL on the CPU): the page
+    draws the tree (every swatch colour in the graph view), the demonstrated paths (a
+    branch colour in the 3D view) and the first log's camera (the camera view shows its
+    last frame, closer to it than to the second log's); both addresses are printed
+    plainly, the data port is the one asked for; Ctrl-C leaves no process behind."""
+    from smccli.bench.viewer import (
+        CAMERA,
+        browser_page,
+        image_distance,
+        image_in_panel,
+        serving,
+        wait_for,
+        webgl_url,
+    )
+    from smccli.bench.viewer import _tree_drawn as tree_drawn
+
+    assert len(inputs.demos) >= 2, "needs the pick_place sample logs"
+    first, second = (read_log(p).frames[-1].rgb for p in inputs.demos[:2])
+
+    def drawn(image: np.ndarray) -> bool:
+        shown = image_in_panel(CAMERA.crop(image))
+        return (
+            tree_drawn(load_tree(inputs.tree))(image)
+            and shown is not None
+            and image_distance(shown, first) < 20
+        )
+
+    port, grpc = _free_port(), _free_port()
+    before = _descendants(os.getpid())
+    with serving(inputs.tree, inputs.demos[:2], port=port, grpc_port=grpc) as served:
+        assert served.viewer.startswith(f"http://127.0.0.1:{port}/?url=")
+        assert served.data == f"rerun+http://127.0.0.1:{grpc}/proxy"
+        children = _descendants(served.proc.pid)
+        assert children, "the web viewer runs as a child process"
+        with browser_page() as page:
+            page.goto(webgl_url(served.viewer), timeout=180_000)
+            image = wait_for(page, drawn, timeout=600)
+        shown = image_in_panel(CAMERA.crop(image))
+        assert shown is not None
+        assert image_distance(shown, first) < image_distance(shown, second), (
+            "the page opens on the first log's recording"
+        )
+    assert served.proc.returncode == 0, served.proc.stderr.read() if served.proc.stderr else ""
+    for pid in children:
+        assert not _alive(pid), f"viewer process {pid} still running"
+    left = {p for p in _descendants(os.getpid()) - before if _alive(p)}
+    assert not left, f"processes left: {left}"
+    with pytest.raises(OSError):
+        urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=2)

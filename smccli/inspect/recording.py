@@ -496,7 +496,7 @@ def _cluster_name(cluster: Any, tree: Tree) -> str:
     return colour_name(_cluster_rgb(cluster, tree))
 
 
-def _swatch_rgb(edge: Edge, tree: Tree, fallback: tuple[int, int, int]) -> tuple[int, int, int]:
+def swatch_rgb(edge: Edge, tree: Tree, fallback: tuple[int, int, int]) -> tuple[int, int, int]:
     """An SMC's colour in the graph: its salient object's, else its room's, else its branch's."""
     p = edge.smc.perception
     if p.cluster is not None:
@@ -962,7 +962,7 @@ def log_tree(rec: Any, tree: Tree, *, mobile: MobileView | None = None) -> None:
     for e in tree.edges:
         ids += [e.id, f"{e.id} colour"]
         texts += [labels[e.id], _SWATCH]
-        rgb += [_TEXT, _swatch_rgb(e, tree, colours[e.id])]
+        rgb += [_TEXT, swatch_rgb(e, tree, colours[e.id])]
         where += [layout.labels[e.id], layout.swatches[e.id]]
     rec.log("/tree", rr.GraphNodes(ids, positions=where, labels=texts, colors=rgb), static=True)
     rec.log(
