@@ -72,7 +72,7 @@ def graph_layout(tree: Tree, labels: dict[str, str]) -> GraphLayout:
     widest = max((w for w, _ in size.values()), default=NODE_W)
     tallest = max((h for _, h in size.values()), default=LINE_H)
     column = max(widest + SWATCH + 16.0, NODE_W) + GAP
-    row = NODE_H + tallest + 3 * GAP
+    row = NODE_H + tallest + 2 * GAP + 8.0
     xs: dict[str, float] = {}
     next_col = [0.0]
 
