@@ -511,22 +511,15 @@ def test_web_viewer_draws_in_a_real_browser(inputs, tmp_path):
         browser_page,
         image_distance,
         image_in_panel,
+        page_drawn,
         serving,
         wait_for,
         webgl_url,
     )
-    from smccli.bench.viewer import _tree_drawn as tree_drawn
 
     assert len(inputs.demos) >= 2, "needs the pick_place sample logs"
     first, second = (read_log(p).frames[-1].rgb for p in inputs.demos[:2])
-
-    def drawn(image: np.ndarray) -> bool:
-        shown = image_in_panel(CAMERA.crop(image))
-        return (
-            tree_drawn(load_tree(inputs.tree))(image)
-            and shown is not None
-            and image_distance(shown, first) < 20
-        )
+    drawn = page_drawn(load_tree(inputs.tree), first)
 
     port, grpc = _free_port(), _free_port()
     before = _descendants(os.getpid())

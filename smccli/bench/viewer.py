@@ -213,8 +213,10 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _tree_drawn(tree: Any) -> Callable[[np.ndarray], bool]:
-    """The page shows ``tree``: every swatch colour in the graph, a branch colour in 3D."""
+def page_drawn(tree: Any, frame: np.ndarray | None = None) -> Callable[[np.ndarray], bool]:
+    """Whether a screenshot shows ``tree``: every swatch colour in the graph view, a branch
+    colour in the 3D view; with ``frame`` (an RGB camera frame), the camera view shows a
+    picture within 20 (mean, of 255) of it."""
     from smccli.inspect.recording import branch_colours, swatch_rgb
 
     colours = branch_colours(tree)
@@ -222,9 +224,14 @@ def _tree_drawn(tree: Any) -> Callable[[np.ndarray], bool]:
 
     def drawn(image: np.ndarray) -> bool:
         graph, world = GRAPH.crop(image), WORLD.crop(image)
-        return all(colour_pixels(graph, c, 10) >= 6 for c in swatches) and any(
-            colour_pixels(world, c, 10) >= 20 for c in set(colours.values())
-        )
+        if not all(colour_pixels(graph, c, 10) >= 6 for c in swatches):
+            return False
+        if not any(colour_pixels(world, c, 10) >= 20 for c in set(colours.values())):
+            return False
+        if frame is None:
+            return True
+        shown = image_in_panel(CAMERA.crop(image))
+        return shown is not None and image_distance(shown, frame) < 20
 
     return drawn
 
@@ -235,6 +242,7 @@ def main() -> None:
 
     from smccli.learn.compile import compile_logs
     from smccli.learn.tree import load_tree
+    from smccli.logs import read_log
 
     repo = Path(__file__).resolve().parents[2]
     samples = repo / "sample_logs"
@@ -245,7 +253,7 @@ def main() -> None:
             logs = sorted((samples / scene).glob("*.mcap"))
             tree_path = Path(tmp) / f"{scene}.json"
             compile_logs(logs, tree_path)
-            drawn = _tree_drawn(load_tree(tree_path))
+            drawn = page_drawn(load_tree(tree_path), read_log(logs[0]).frames[-1].rgb)
             with serving(tree_path, logs, port=_free_port()) as served:
                 with browser_page() as page:
                     page.goto(webgl_url(served.viewer), timeout=120_000)
