@@ -205,14 +205,6 @@ def image_distance(shown: np.ndarray, frame: np.ndarray) -> float:
 # --- README screenshots -------------------------------------------------------------------
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def page_drawn(tree: Any, frame: np.ndarray | None = None) -> Callable[[np.ndarray], bool]:
     """Whether a screenshot shows ``tree``: every swatch colour in the graph view, a branch
     colour in the 3D view; with ``frame`` (an RGB camera frame), the camera view shows a
@@ -240,6 +232,7 @@ def main() -> None:
     """Screenshots of the sample trees in the web viewer -> docs/img/viewer_<scene>.png."""
     from PIL import Image
 
+    from smccli.inspect.recording import free_port
     from smccli.learn.compile import compile_logs
     from smccli.learn.tree import load_tree
     from smccli.logs import read_log
@@ -254,7 +247,7 @@ def main() -> None:
             tree_path = Path(tmp) / f"{scene}.json"
             compile_logs(logs, tree_path)
             drawn = page_drawn(load_tree(tree_path), read_log(logs[0]).frames[-1].rgb)
-            with serving(tree_path, logs, port=_free_port()) as served:
+            with serving(tree_path, logs, port=free_port()) as served:
                 with browser_page() as page:
                     page.goto(webgl_url(served.viewer), timeout=120_000)
                     wait_for(page, drawn, timeout=600)

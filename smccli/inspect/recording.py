@@ -327,7 +327,8 @@ def rerun_binary() -> str:
     return str(exe)
 
 
-def _free_port() -> int:
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 now."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
@@ -400,7 +401,7 @@ def serve_recordings(
             raise SmcError(f"{flag} {p}: 127.0.0.1:{p} is already in use")
     if grpc_port == port:
         raise SmcError(f"--grpc-port {grpc_port}: the same as --port")
-    grpc = grpc_port if grpc_port is not None else _free_port()
+    grpc = grpc_port if grpc_port is not None else free_port()
     addresses = Addresses(
         viewer=f"http://127.0.0.1:{port}/?url="
         + urllib.parse.quote(f"rerun+http://127.0.0.1:{grpc}/proxy", safe=""),
