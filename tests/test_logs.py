@@ -56,7 +56,9 @@ def write_demo(
     path: Path, seconds: float = 2.0, *, camera_hz: int = 10, **kw: object
 ) -> dict[str, list]:
     """A demo with every topic; returns what was written, per kind."""
-    written: dict[str, list] = {k: [] for k in ("cmd", "js", "poi", "cam", "gt", "pc", "dec")}
+    written: dict[str, list] = {
+        k: [] for k in ("cmd", "js", "poi", "base", "cam", "gt", "pc", "dec")
+    }
     rng = np.random.default_rng(0)
     kw.setdefault("metadata", {"scene": "pick_place", "seed": "0", "operator": "script"})
     kw.setdefault("attachments", {"scene.xml": ("application/xml", b"<mujoco/>")})
@@ -65,7 +67,9 @@ def write_demo(
         n = int(seconds * 100)
         for k in range(n):
             t = k / 100
-            cmd = PoiCommand(t, np.array([0.4 + t / 10, 0.0, 0.3, 0.2 * t]), 1.0 - k / n)
+            # Every other command also moves a mobile manipulator's base.
+            base = np.array([t / 5, -t / 10, 0.3 * t]) if k % 2 else None
+            cmd = PoiCommand(t, np.array([0.4 + t / 10, 0.0, 0.3, 0.2 * t]), 1.0 - k / n, base)
             w.write_command(cmd)
             js = JointState(
                 t,
@@ -77,6 +81,8 @@ def write_demo(
             w.write_joint_state(js)
             poi = np.array([0.4, 0.1 * t, 0.3, 0.5 * t - 0.4])
             w.write_poi(t, poi)
+            w.write_base(t, np.array([t / 5, -t / 10, 2.5 * t]))  # yaw wraps: read unwrapped
+            written["base"].append((t, np.array([t / 5, -t / 10, 2.5 * t])))
             written["cmd"].append(cmd)
             written["js"].append(js)
             written["poi"].append((t, poi))
@@ -127,6 +133,9 @@ def test_round_trip_every_topic(demo: tuple[Path, dict[str, list]]) -> None:
         assert a.t == pytest.approx(b.t, abs=1e-9)
         np.testing.assert_array_equal(a.target, b.target)
         assert a.gripper == b.gripper
+        assert (a.base is None) == (b.base is None)
+        if b.base is not None:
+            np.testing.assert_array_equal(a.base, b.base)
     for a, b in zip(log.joint_states, wr["js"], strict=True):
         assert a.names == b.names
         np.testing.assert_array_equal(a.position, b.position)
@@ -134,6 +143,8 @@ def test_round_trip_every_topic(demo: tuple[Path, dict[str, list]]) -> None:
         np.testing.assert_array_equal(a.effort, b.effort)
     np.testing.assert_allclose(log.poi_t, [t for t, _ in wr["poi"]], atol=1e-9)
     np.testing.assert_allclose(log.poi, [p for _, p in wr["poi"]], atol=1e-12)
+    np.testing.assert_allclose(log.base_t, [t for t, _ in wr["base"]], atol=1e-9)
+    np.testing.assert_allclose(log.base, [b for _, b in wr["base"]], atol=1e-9)
     assert len(log.frames) == len(wr["cam"])
     for a, b in zip(log.frames, wr["cam"], strict=True):
         assert a.t == pytest.approx(b.t, abs=1e-9)

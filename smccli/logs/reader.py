@@ -99,6 +99,11 @@ class Log:
     """True when the file ends before its footer (killed recorder, ``.part`` file)."""
     point_clouds: list[PointCloudMsg] = field(default_factory=list)
     scans: list[Scan] = field(default_factory=list)
+    base_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """A mobile manipulator's base pose times, shape (B,) [s] (empty otherwise)."""
+    base: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    """Its base pose ``[x, y, yaw]`` (odometry), shape (B, 3) [m, m, rad]; yaw unwrapped.
+    Its ``poi`` is then the end effector in the base's frame."""
     end: dict[str, str] = field(default_factory=dict)
     """The ``smc_end`` metadata record: how the recording ended (``end`` = complete |
     interrupted, ``reason``); empty for a log cut short or written before it existed."""
@@ -432,13 +437,15 @@ def read_log(
         truncated=raw.truncated,
         point_clouds=d.point_clouds,
         scans=d.scans,
+        base_t=np.array(d.base_t, dtype=float),
+        base=_unwrap_yaw(np.array(d.base, dtype=float).reshape(-1, 3), column=2),
     )
 
 
-def _unwrap_yaw(poi: np.ndarray) -> np.ndarray:
+def _unwrap_yaw(poi: np.ndarray, column: int = 3) -> np.ndarray:
     # The log stores yaw as a quaternion (wrapped to (-pi, pi]); trajectories need it continuous.
     if len(poi):
-        poi[:, 3] = np.unwrap(poi[:, 3])
+        poi[:, column] = np.unwrap(poi[:, column])
     return poi
 
 
@@ -453,6 +460,8 @@ class _Decoder:
         self.joint_states: list[JointState] = []
         self.poi_t: list[float] = []
         self.poi: list[np.ndarray] = []
+        self.base_t: list[float] = []
+        self.base: list[np.ndarray] = []
         self.weight_t: list[float] = []
         self.weight: list[float] = []
         self.marks: list[SaliencyMark] = []
@@ -503,7 +512,9 @@ class _Decoder:
         if topic == tp.COMMAND:
             target = _finite(self.path, topic, t, msg["target"])
             gripper = float(_finite(self.path, topic, t, msg["gripper"]))
-            self.commands.append(PoiCommand(t=t, target=target, gripper=gripper))
+            base = msg.get("base_target")
+            base = None if base is None else _finite(self.path, topic, t, base)
+            self.commands.append(PoiCommand(t=t, target=target, gripper=gripper, base=base))
         elif topic == tp.JOINT_STATES:
             self.joint_states.append(self._joint_state(t, msg))
         elif topic == tp.POI:
@@ -512,6 +523,12 @@ class _Decoder:
             _rotation(q, "orientation")
             self.poi_t.append(t)
             self.poi.append(np.array([*pos, tp.quat_to_yaw(q)]))
+        elif topic == tp.BASE:
+            pos, q = tp.get_pose(msg.pose)
+            _finite(self.path, topic, t, [*pos, *q])
+            _rotation(q, "orientation")
+            self.base_t.append(t)
+            self.base.append(np.array([pos[0], pos[1], tp.quat_to_yaw(q)]))
         elif topic == tp.COLOR:
             self.color.append((t_ns, msg.frame_id, msg.format, msg.data))
         elif topic == tp.DEPTH:

@@ -31,6 +31,8 @@ from smccli.schemas import schema_path
 COMMAND = "/teleop/command"
 JOINT_STATES = "/robot/joint_states"
 POI = "/robot/poi"
+BASE = "/robot/base"
+"""A mobile manipulator's base pose (odometry); its ``/robot/poi`` is then in frame ``base``."""
 COLOR = "/camera/color"
 DEPTH = "/camera/depth"
 CALIBRATION = "/camera/calibration"
@@ -46,6 +48,7 @@ DECISION = "/smc/decision"
 PROTO_TOPICS: dict[str, type[ProtoMessage]] = {
     JOINT_STATES: JointStates,
     POI: PoseInFrame,
+    BASE: PoseInFrame,
     COLOR: CompressedImage,
     DEPTH: CompressedImage,
     CALIBRATION: CameraCalibration,
@@ -69,6 +72,7 @@ METADATA_NAME = "smc"
 END_METADATA_NAME = "smc_end"
 """Metadata record written when a recording is closed: ``end`` = complete | interrupted."""
 WORLD = "world"
+BASE_FRAME = "base"
 DEPTH_SCALE = 1000.0
 """Depth PNG units per metre: 16-bit millimetres, 0 = no return, range up to 65.535 m."""
 

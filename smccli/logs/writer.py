@@ -250,9 +250,10 @@ class LogWriter:
 
     def write_command(self, cmd: PoiCommand) -> None:
         target = _finite("command target", cmd.target)
-        self.write_json(
-            tp.COMMAND, cmd.t, {"target": target.tolist(), "gripper": float(cmd.gripper)}
-        )
+        msg: dict[str, Any] = {"target": target.tolist(), "gripper": float(cmd.gripper)}
+        if cmd.base is not None:
+            msg["base_target"] = _finite("command base target", cmd.base).tolist()
+        self.write_json(tp.COMMAND, cmd.t, msg)
 
     def write_joint_state(self, js: JointState) -> None:
         msg = JointStates()
@@ -266,19 +267,39 @@ class LogWriter:
             )
         self._proto(tp.JOINT_STATES, tp.to_ns(js.t), msg)
 
-    def write_poi(self, t: float, poi: np.ndarray) -> None:
-        """POI ``[x, y, z, yaw]`` as a PoseInFrame (rotation about world z) and tf world->poi."""
+    def write_poi(self, t: float, poi: np.ndarray, frame: str = tp.WORLD) -> None:
+        """POI ``[x, y, z, yaw]`` as a PoseInFrame (rotation about z) in ``frame`` (a mobile
+        manipulator's: ``base``) and tf frame->poi."""
         p = _finite("POI", poi)
         t_ns, q = tp.to_ns(t), tp.yaw_to_quat(float(p[3]))
-        msg = PoseInFrame(frame_id=tp.WORLD)
+        msg = PoseInFrame(frame_id=frame)
         tp.stamp(msg, t_ns)
         tp.set_pose(msg.pose, p[:3], q)
         self._proto(tp.POI, t_ns, msg)
-        self._tf(t_ns, "poi", p[:3], q)
+        self._tf(t_ns, "poi", p[:3], q, parent=frame)
 
-    def _tf(self, t_ns: int, child: str, position: np.ndarray, quat: np.ndarray) -> None:
+    def write_base(self, t: float, pose: np.ndarray) -> None:
+        """A mobile manipulator's base pose ``[x, y, yaw]`` (odometry) on ``/robot/base``
+        and tf world->base."""
+        p = _finite("base pose", pose)
+        t_ns, q = tp.to_ns(t), tp.yaw_to_quat(float(p[2]))
+        position = np.array([p[0], p[1], 0.0])
+        msg = PoseInFrame(frame_id=tp.WORLD)
+        tp.stamp(msg, t_ns)
+        tp.set_pose(msg.pose, position, q)
+        self._proto(tp.BASE, t_ns, msg)
+        self._tf(t_ns, tp.BASE_FRAME, position, q)
+
+    def _tf(
+        self,
+        t_ns: int,
+        child: str,
+        position: np.ndarray,
+        quat: np.ndarray,
+        parent: str = tp.WORLD,
+    ) -> None:
         msg = FrameTransforms()
-        tr = msg.transforms.add(parent_frame_id=tp.WORLD, child_frame_id=child)
+        tr = msg.transforms.add(parent_frame_id=parent, child_frame_id=child)
         tp.stamp(tr, t_ns)
         tp.set_pose(tr, position, quat)
         self._proto(tp.TF, t_ns, msg)

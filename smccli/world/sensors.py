@@ -2,8 +2,9 @@
 
 Times are simulation seconds (float) in memory and integer nanoseconds in logs.
 The arm's point of interest (POI) is the end-effector site: ``[x, y, z, yaw]`` in the
-world frame [m, m, m, rad], the gripper pointing down; the gripper opening is in [0, 1]
-(1 = fully open).
+world frame [m, m, m, rad] (a mobile manipulator's: in its base's frame), the gripper
+pointing down; the gripper opening is in [0, 1] (1 = fully open). A mobile base's pose is
+``[x, y, yaw]`` in odometry's frame.
 """
 
 from __future__ import annotations
@@ -23,6 +24,10 @@ class PoiCommand:
     """POI target ``[x, y, z, yaw]``, shape (4,) [m, m, m, rad], world frame."""
     gripper: float
     """Gripper opening command in [0, 1], 1 = open."""
+    base: np.ndarray | None = None
+    """A mobile manipulator's base target ``[x, y, yaw]``, shape (3,) [m, m, rad], in
+    odometry's frame; its ``target`` is then the end effector in the base's frame
+    (DESIGN.md 9: two POIs). None: the base holds its last target."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -58,6 +58,15 @@ def _between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array([c * dx + s * dy, -s * dx + c * dy, wrap(float(b[2] - a[2]))])
 
 
+def _planar(pose: np.ndarray) -> np.ndarray:
+    """A planar pose (x, y, yaw) as a 4 x 4 transform."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    T = np.eye(4)
+    T[:2, :2] = [[c, -s], [s, c]]
+    T[:2, 3] = pose[:2]
+    return T
+
+
 @dataclass(frozen=True, slots=True)
 class OdometryDrift:
     """Wheel odometry's error, added on purpose (DESIGN.md 9: odometry = joint readings).
@@ -94,14 +103,12 @@ class Sim:
         self.control_period = CONTROL_PERIOD
         self.n_substeps = max(1, round(CONTROL_PERIOD / m.opt.timestep))
         robot = self.robot = scene.robot
-        if robot.base is not None and robot.arm_joints:
-            # Declared and checked against the MJCF; base and arm together come with the
-            # mobile manipulator (two POIs, DESIGN.md 9).
-            raise SceneError(
-                f"scene {scene.name}: robot {robot.name} has a mobile base and an arm; smc "
-                "drives a fixed arm or a mobile base so far"
-            )
+        self.mobile_manipulator = robot.base is not None and bool(robot.arm_joints)
+        """Base and arm: two POIs, the base's pose (odometry) and the end effector in the
+        base's frame (DESIGN.md 9)."""
         self.poi_id = self._id(mujoco.mjtObj.mjOBJ_SITE, robot.poi)
+        # A mobile manipulator's controller solves in the base's frame: its own copy of the
+        # model keeps the base joints at zero, where the base frame is the model's origin.
         self.controller = (
             CartesianController(m, robot, control_period=CONTROL_PERIOD)
             if robot.arm_joints
@@ -121,6 +128,9 @@ class Sim:
         self._finger_v = self._jv[n_base + n_arm :]
         self._base_act = np.array(
             [self._id(act, n) for n in (robot.base.actuators if robot.base else ())], dtype=int
+        )
+        self._base_body = (
+            int(m.jnt_bodyid[self._id(mujoco.mjtObj.mjOBJ_JOINT, base[-1])]) if base else -1
         )
         self._arm_act = np.array([self._id(act, n) for n in robot.arm_actuators], dtype=int)
         self._grip_act = self._id(act, robot.gripper.actuator) if robot.gripper else -1
@@ -221,7 +231,9 @@ class Sim:
         """Odometry's base pose (x, y, yaw) [m, m, rad], yaw unwrapped."""
         self._odom_truth = base_pose.copy()
         """The true pose at the last odometry update."""
-        self._last = PoiCommand(0.0, self.poi(), 1.0)
+        self._last = PoiCommand(
+            0.0, self.poi(), 1.0, base=self.base_odometry() if self.mobile_manipulator else None
+        )
         # Tare: the empty scale's reading is the platform's own weight.
         self._tare = 0.0 if self._scale_sensor is None else self._scale_force()
 
@@ -237,6 +249,8 @@ class Sim:
         ``[x, y, z, yaw]`` (z ignored) is its joints' target directly, the yaw unwrapped to
         the turn nearest the current one (the hinge is continuous).
         """
+        if self.mobile_manipulator and cmd.base is None:  # the base holds its last target
+            cmd = PoiCommand(cmd.t, cmd.target, cmd.gripper, base=self._last.base)
         self._last = cmd
         target = np.asarray(cmd.target, float)
         if self.controller is not None:
@@ -244,10 +258,15 @@ class Sim:
         if self.robot.gripper is not None:
             self.data.ctrl[self._grip_act] = self.robot.gripper.target(cmd.gripper)
         if len(self._base_act):
+            base = (
+                np.asarray(cmd.base, float)
+                if self.mobile_manipulator and cmd.base is not None
+                else np.array([target[0], target[1], target[3]])
+            )
             # The target is in odometry's frame: the same place relative to the robot in
             # the joints' frame (identity without drift).
             odom_to_true = _compose(self._odom_truth, _between(self._odom, np.zeros(3)))
-            x, y, yaw = _compose(odom_to_true, np.array([target[0], target[1], target[3]]))
+            x, y, yaw = _compose(odom_to_true, base)
             yaw_now = float(self.data.qpos[self._base_q[2]])
             yaw = yaw_now + wrap(float(yaw) - yaw_now)
             self.data.ctrl[self._base_act] = [x, y, yaw]
@@ -270,18 +289,35 @@ class Sim:
 
     def settle(self, seconds: float) -> None:
         """Hold the last command for ``seconds`` [s] (lets objects come to rest)."""
+        last = self._last
         for _ in range(max(0, round(seconds / self.control_period))):
-            self.step(PoiCommand(self.t, self._last.target, self._last.gripper))
+            self.step(PoiCommand(self.t, last.target, last.gripper, base=last.base))
 
     # --- robot sensors -----------------------------------------------------------------
 
     def poi(self) -> np.ndarray:
         """POI ``[x, y, z, yaw]`` [m, m, m, rad], yaw in (−π, π]; a mobile base's is its
-        odometry (z = 0)."""
-        if len(self._base_q) and self.drift is not None:
-            x, y, yaw = self._odom
-            return np.array([x, y, 0.0, wrap(float(yaw))])
+        odometry (z = 0); a mobile manipulator's is the end effector in the base's frame
+        (from the arm's joints: the base's pose plays no part)."""
+        if self.mobile_manipulator:
+            d, b = self.data, self._base_body
+            R_b = d.xmat[b].reshape(3, 3)
+            R = R_b.T @ d.site_xmat[self.poi_id].reshape(3, 3)
+            p = R_b.T @ (d.site_xpos[self.poi_id] - d.xpos[b])
+            return np.array([*p, math.atan2(R[1, 0], R[0, 0])])
+        if len(self._base_q):
+            x, y, yaw = self.base_odometry()
+            return (
+                np.array([x, y, 0.0, yaw])
+                if self.drift is not None
+                else poi_pose(self.data, self.poi_id)
+            )
         return poi_pose(self.data, self.poi_id)
+
+    def base_odometry(self) -> np.ndarray:
+        """A mobile base's pose ``[x, y, yaw]`` from odometry [m, m, rad], yaw in (−π, π]."""
+        x, y, yaw = self._odom
+        return np.array([x, y, wrap(float(yaw))])
 
     def lidar_height(self) -> float:
         """Height of the lidar's scan plane above the floor [m] (a fixed mounting)."""
@@ -293,12 +329,10 @@ class Sim:
         if self._lidar_site < 0:
             return None
         d = self.data
-        poi = poi_pose(d, self.poi_id)
         R = d.site_xmat[self._lidar_site].reshape(3, 3)
         site = np.array([*d.site_xpos[self._lidar_site][:2], math.atan2(R[1, 0], R[0, 0])])
-        mount = _between(np.array([poi[0], poi[1], poi[3]]), site)
-        p = self.poi()
-        out = _compose(np.array([p[0], p[1], p[3]]), mount)
+        mount = _between(self._base_truth(), site)
+        out = _compose(self.base_odometry(), mount)
         out[2] = wrap(float(out[2]))
         return out
 
@@ -396,12 +430,23 @@ class Sim:
         return np.array([[f, 0.0, (cam.width - 1) / 2], [0.0, f, (cam.height - 1) / 2], [0, 0, 1]])
 
     def camera_pose(self) -> np.ndarray:
-        """T_world_camera, shape (4, 4), optical frame (x right, y down, z forward)."""
+        """T_world_camera, shape (4, 4), optical frame (x right, y down, z forward). A camera
+        on a mobile base: its mounting on the robot composed with odometry's base pose (the
+        world frame is odometry's, as for the lidar)."""
         T = np.eye(4)
         # MuJoCo cameras look along −z with y up: flip y and z for the optical convention.
         T[:3, :3] = self.data.cam_xmat[self._cam_id].reshape(3, 3) @ np.diag([1.0, -1.0, -1.0])
         T[:3, 3] = self.data.cam_xpos[self._cam_id]
+        if len(self._base_q) and self.drift is not None:
+            T = _planar(self.base_odometry()) @ np.linalg.inv(_planar(self._base_truth())) @ T
         return T
+
+    def _base_truth(self) -> np.ndarray:
+        """The base body's planar pose from the joints ``[x, y, yaw]`` (what odometry
+        integrates; used only to express mountings relative to the base)."""
+        d, b = self.data, self._base_body
+        R = d.xmat[b].reshape(3, 3)
+        return np.array([d.xpos[b][0], d.xpos[b][1], math.atan2(R[1, 0], R[0, 0])])
 
     def close(self) -> None:
         """Free the renderer's GL context."""
