@@ -196,7 +196,7 @@ def test_scene_mismatch() -> None:
         (
             "  - move_to: {object: orange_cube, ofset: [0, 0, 0.1]}\n",
             "step 0 (line 3): move_to.ofset: unknown key 'ofset' (valid: object, offset, yaw, "
-            "duration)",
+            "duration, base)",
         ),
         (
             "  - wait: 1\n  - move_to:\n      object: orange_cube\n      offset: [0, 0, high]\n",

@@ -65,7 +65,7 @@ class ReplayLog:
             w.write_ground_truth(t, sim.ground_truth())  # evaluation topic, not read by control
             self.next_gt += self.gt_period
         w.write_joint_state(sim.joint_state())
-        w.write_poi(t, sim.poi())
+        w.write_robot_pose(sim)
         kg = sim.weight()
         if kg is not None:
             w.write_weight(t, kg)

@@ -408,6 +408,15 @@ class LogWriter:
         tp.set_pose(msg.pose, T[:3, 3], tp.matrix_to_quat(T[:3, :3]))
         self._proto(tp.SCAN, tp.to_ns(t), msg)
 
+    def write_robot_pose(self, sim: Sim) -> None:
+        """The robot's POI now; a mobile manipulator's in frame ``base``, with the base's
+        pose (odometry) on ``/robot/base``."""
+        if sim.mobile_manipulator:
+            self.write_base(sim.t, sim.base_odometry())
+            self.write_poi(sim.t, sim.poi(), frame=tp.BASE_FRAME)
+        else:
+            self.write_poi(sim.t, sim.poi())
+
     def write_lidar(self, sim: Sim) -> None:
         """The robot's lidar scan now, if it has one: ``/lidar/scan`` in the lidar's own
         frame, and that frame on ``/tf`` where odometry puts it (the lidar's height from its

@@ -63,6 +63,9 @@ class Step:
     """wait: how long [s]."""
     place: str | None = None
     """move_to from a ``go_to`` step: the scene's named place [x, y, yaw] to drive to."""
+    base: str | tuple[float, float, float] | None = None
+    """move_to of a mobile manipulator: where its base goes in the same move (a place's
+    name or ``(x, y, yaw)``); None: the base stays."""
 
     def where(self, source: str) -> str:
         return f"{source}: step {self.index} (line {self.line}, {self.kind})"
@@ -175,6 +178,13 @@ def _step(raw: dict[str, Any], index: int, line: int) -> Step:
             ),
             yaw=float(value["yaw"]) if "yaw" in value else (0.0 if "object" in value else None),
             duration=float(value["duration"]) if "duration" in value else None,
+            base=(
+                None
+                if value.get("base") is None
+                else value["base"]
+                if isinstance(value["base"], str)
+                else tuple(float(v) for v in value["base"])  # type: ignore[arg-type]
+            ),
         )
     if kind == "go_to":  # a mobile base to a named place: a move_to resolved at start
         spec = {"place": value} if isinstance(value, str) else value
@@ -205,6 +215,12 @@ class _Active:
     pause: float = 0.0
     duration: float = 0.0
     still_ticks: int = 0
+    base_start: np.ndarray | None = None
+    """A mobile manipulator's base path (odometry frame ``[x, y, yaw]``), start and goal."""
+    base_goal: np.ndarray | None = None
+    world_start: np.ndarray | None = None
+    """Its end effector's path in the world (None: it rides with the base)."""
+    world_goal: np.ndarray | None = None
 
 
 class ScriptOperator:
@@ -226,12 +242,24 @@ class ScriptOperator:
         names = [o.name for o in sim.scene.objects if o.name in sim.present]
         places = [n for n, _ in sim.scene.places]
         for step in script.steps:
-            if step.place is not None and step.place not in places:
+            for place in (step.place, step.base if isinstance(step.base, str) else None):
+                if place is not None and place not in places:
+                    raise ScriptError(
+                        f"{step.where(script.source)}: no place {place!r} in scene "
+                        f"{sim.scene.name} (places: {', '.join(places) or 'none'})"
+                    )
+            if step.base is not None and not sim.mobile_manipulator:
                 raise ScriptError(
-                    f"{step.where(script.source)}: no place {step.place!r} in scene "
-                    f"{sim.scene.name} (places: {', '.join(places) or 'none'})"
+                    f"{step.where(script.source)}: base: moves a mobile manipulator's base; "
+                    f"scene {sim.scene.name}'s robot {sim.robot.name!r} is not one"
                 )
-            if step.object is not None and step.object not in names:
+            # A mobile manipulator's operator also grasps the scene's furniture (a door's
+            # handle is a body of the scene's MJCF, not a listed object).
+            if (
+                step.object is not None
+                and step.object not in names
+                and not (sim.mobile_manipulator and sim.has_body(step.object))
+            ):
                 raise ScriptError(
                     f"{step.where(script.source)}: no object {step.object!r} in scene "
                     f"{sim.scene.name} as laid out (objects: {', '.join(names)})"
@@ -242,6 +270,8 @@ class ScriptOperator:
         self._i = 0
         self._active: _Active | None = None
         self._target = sim.poi()  # the hand starts where the robot is
+        self._base = sim.base_odometry() if sim.mobile_manipulator else None
+        """A mobile manipulator's base target (its ``_target`` is in the base's frame)."""
         self._gripper = sim.gripper_opening()
         self._tremor = np.zeros(3)
         self._a = math.exp(-sim.control_period / TREMOR_TIME_CONSTANT)
@@ -275,12 +305,15 @@ class ScriptOperator:
                 self.rng.standard_normal(3)
             )
             target[:3] += self._tremor
-        return PoiCommand(t=t, target=target, gripper=self._gripper)
+        base = None if self._base is None else self._base.copy()
+        return PoiCommand(t=t, target=target, gripper=self._gripper, base=base)
 
     def _start(self, step: Step, t: float) -> _Active:
         act = _Active(step, t)
         if step.kind != "move_to":
             return act
+        if self._base is not None:
+            return self._start_mobile(act)
         goal = self._goal(step)
         if not reachable(self.sim.model, self.sim.robot, goal):
             raise ScriptError(
@@ -306,7 +339,56 @@ class ScriptOperator:
         act.pause = pause if hesitate else 0.0
         return act
 
-    def _goal(self, step: Step) -> np.ndarray:
+    def _start_mobile(self, act: _Active) -> _Active:
+        """A mobile manipulator's move: the base to its goal (``go_to``, ``base``), the end
+        effector to its world goal (``object``, ``position``), both on one clock."""
+        step = act.step
+        assert self._base is not None
+        b0 = self._base.copy()
+        where = step.place if step.place is not None else step.base
+        if where is None:
+            b1 = b0.copy()
+        else:
+            b1 = np.array(self.sim.scene.place(where) if isinstance(where, str) else where)
+            b1[2] = b0[2] + wrap(float(b1[2] - b0[2]))
+        act.base_start, act.base_goal = b0, b1
+        if step.place is None:  # the hand moves in the world
+            act.world_start = _to_world(b0, self._target)
+            act.world_goal = self._goal(step, base=b1)
+            act.world_goal[3] = act.world_start[3] + wrap(act.world_goal[3] - act.world_start[3])
+            act.goal = _to_base(b1, act.world_goal)
+        else:  # it rides with the base
+            act.goal = self._target.copy()
+        act.start = self._target.copy()
+        if not reachable(self.sim.model, self.sim.robot, act.goal):
+            g = act.goal
+            raise ScriptError(
+                f"{step.where(self.script.source)}: target [{g[0]:.3f}, {g[1]:.3f}, "
+                f"{g[2]:.3f}] m, yaw {g[3]:.2f} rad in the base's frame is out of reach"
+            )
+        arm = (
+            0.0
+            if act.world_start is None
+            else float(
+                np.linalg.norm(act.world_goal[:3] - act.world_start[:3])  # type: ignore[index]
+            )
+        )
+        turn = abs(b1[2] - b0[2])
+        duration = step.duration or max(
+            MIN_MOVE_TIME,
+            arm / self.script.speed,
+            float(np.linalg.norm(b1[:2] - b0[:2])) / self.script.speed,
+            turn / self.script.yaw_speed,
+        )
+        v = self.script.speed_variation
+        hesitate = self.rng.uniform() < self.script.hesitation
+        scale = self.rng.uniform(1 - v, 1 + v)
+        pause = self.rng.uniform(0.2, 0.6)
+        act.duration = duration * (scale if step.duration is None else 1.0)
+        act.pause = pause if hesitate else 0.0
+        return act
+
+    def _goal(self, step: Step, base: np.ndarray | None = None) -> np.ndarray:
         if step.place is not None:
             x, y, yaw = self.sim.scene.place(step.place)
             return np.array([x, y, 0.0, yaw])
@@ -324,8 +406,10 @@ class ScriptOperator:
         if self.sim.robot.gripper is None:  # a mobile base: its heading is what it is
             return goal
         # The gripper is symmetric under a half turn: take the yaw (mod π) nearest the
-        # wrist's comfortable yaw, which points along the arm (base yaw = atan2(y, x)).
-        comfort = math.atan2(goal[1], goal[0])
+        # wrist's comfortable yaw, which points along the arm (base yaw = atan2(y, x), in
+        # the base's frame for a mobile manipulator).
+        local = goal if base is None else _to_base(base, goal)
+        comfort = math.atan2(local[1], local[0]) + (0.0 if base is None else float(base[2]))
         goal[3] = comfort + wrap(2 * (goal[3] - comfort)) / 2
         return goal
 
@@ -344,11 +428,40 @@ class ScriptOperator:
             return (elapsed > 0.15 and act.still_ticks >= 10) or elapsed > 3.0
         tau = (elapsed - act.pause) / act.duration
         s = minimum_jerk(tau)
-        self._target = act.start + s * (act.goal - act.start)
+        if act.base_start is not None and act.base_goal is not None:
+            self._base = act.base_start + s * (act.base_goal - act.base_start)
+            if act.world_start is not None and act.world_goal is not None:
+                hand = act.world_start + s * (act.world_goal - act.world_start)
+                self._target = _to_base(self._base, hand)
+        else:
+            self._target = act.start + s * (act.goal - act.start)
         if tau < 1.0:
             return False
-        arrived = np.linalg.norm(self.sim.poi()[:3] - act.goal[:3]) < ARRIVAL_TOLERANCE
+        arrived = bool(np.linalg.norm(self.sim.poi()[:3] - act.goal[:3]) < ARRIVAL_TOLERANCE)
+        if act.base_goal is not None:
+            odom = self.sim.base_odometry()
+            arrived = arrived and float(np.linalg.norm(odom[:2] - act.base_goal[:2])) < 0.01
         return bool(arrived or tau * act.duration > act.duration + 1.0)
+
+
+def _to_base(base: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """A world pose ``[x, y, z, yaw]`` in the frame of a base at ``[x, y, yaw]``."""
+    c, s = math.cos(base[2]), math.sin(base[2])
+    dx, dy = pose[0] - base[0], pose[1] - base[1]
+    return np.array([c * dx + s * dy, -s * dx + c * dy, pose[2], pose[3] - base[2]])
+
+
+def _to_world(base: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """A pose ``[x, y, z, yaw]`` in the frame of a base at ``[x, y, yaw]``, in the world."""
+    c, s = math.cos(base[2]), math.sin(base[2])
+    return np.array(
+        [
+            base[0] + c * pose[0] - s * pose[1],
+            base[1] + s * pose[0] + c * pose[1],
+            pose[2],
+            pose[3] + base[2],
+        ]
+    )
 
 
 def run_script(script: Script, sim: Sim, seed: int = 0, *, max_time: float = 600.0):

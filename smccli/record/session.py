@@ -283,7 +283,7 @@ def _stop_requests() -> Iterator[list[str]]:
 def _log_state(writer: LogWriter, sim: Sim) -> None:
     t = sim.t
     writer.write_joint_state(sim.joint_state())
-    writer.write_poi(t, sim.poi())
+    writer.write_robot_pose(sim)
     w = sim.weight()
     if w is not None:
         writer.write_weight(t, w)

@@ -484,9 +484,16 @@ class Sim:
             out.append(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, other) or f"geom {other}")
         return out
 
+    def has_body(self, name: str) -> bool:
+        """Whether the scene's MJCF has a body ``name`` (a door's handle, for the operator)."""
+        return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name) >= 0
+
     def object_pose(self, name: str) -> np.ndarray:
-        """Object ``[x, y, z, yaw]`` (for the simulated operator and evaluation)."""
-        b = self._body[name]
+        """Object ``[x, y, z, yaw]`` (for the simulated operator and evaluation); also any
+        body of the MJCF by name (a handle on a moving door)."""
+        b = self._body.get(name)
+        if b is None:
+            b = self._id(mujoco.mjtObj.mjOBJ_BODY, name)
         R = self.data.xmat[b].reshape(3, 3)
         return np.array([*self.data.xpos[b], math.atan2(R[1, 0], R[0, 0])])
 
