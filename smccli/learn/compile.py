@@ -60,7 +60,7 @@ BASE_TOPICS = {
     "/lidar/scan",
 }
 #: Topics compile reads; the ground truth is deliberately not among them.
-READ_TOPICS = REQUIRED_TOPICS | BASE_TOPICS | {"/tf", "/scale/weight", "/saliency"}
+READ_TOPICS = REQUIRED_TOPICS | BASE_TOPICS | {"/tf", "/scale/weight", "/saliency", "/robot/base"}
 
 
 @dataclass(frozen=True, slots=True)
@@ -166,11 +166,12 @@ def extract_chain(
             f"{t_end - frags[-1].t1:.1f} s"
         )
     if scene.robot.base is not None:
+        smc_of = _mobile_manipulator_smcs if scene.robot.arm_joints else _base_smcs
         return Chain(
             log=log.path,
             sha256=log.sha256,
             fragments=tuple(frags),
-            smcs=tuple(_base_smcs(log, frags, scene, params, warnings)),
+            smcs=tuple(smc_of(log, frags, scene, params, warnings)),
             warnings=tuple(warnings),
         )
     robot = robot_model_of(log)
@@ -217,51 +218,202 @@ def _base_smcs(
     """The SMCs of a mobile base's fragments (paper 4.2): at each decision point the room's
     colours (SI, eq. 17) and the lidar scan with the lidar's odometry pose (SL, salient by
     eq. 18); the commanded base path as a DMP, its goal in the salient scan's frame."""
-    name = log.path.name
+    mount = lidar_mount(scene.model(), scene.robot.poi, _lidar_site(log, scene))
+    base = log.poi[:, [0, 1, 3]]
+    smcs = []
+    for k, frag in enumerate(frags):
+        cmds = _commands(log, frag)
+        t = np.array([c.t for c in cmds]) - cmds[0].t
+        path = np.array([c.target for c in cmds], dtype=float)
+        smcs.append(
+            _navigation_smc(log, k, frag, t, path, log.poi_t, base, mount, params, warnings)
+        )
+    return smcs
+
+
+def _lidar_site(log: Log, scene: Scene) -> str:
     lidar = next((m for m in scene.robot.sensors if m.type == "lidar"), None)
     if lidar is None:
         raise LogError(f"{log.path}: robot {scene.robot.name!r} has no lidar; compile needs one")
-    mount = lidar_mount(scene.model(), scene.robot.poi, lidar.target)
+    return lidar.target
+
+
+def _commands(log: Log, frag: Fragment) -> list:
+    cmds = [c for c in log.commands if frag.t0 - 1e-6 <= c.t <= frag.t1 + 1e-6]
+    if len(cmds) < 3:
+        raise LogError(
+            f"{log.path.name}: fragment {frag.t0:.2f}-{frag.t1:.2f} s holds fewer than 3 "
+            "operator commands"
+        )
+    return cmds
+
+
+def _navigation_smc(
+    log: Log,
+    k: int,
+    frag: Fragment,
+    t: np.ndarray,
+    path: np.ndarray,
+    base_t: np.ndarray,
+    base: np.ndarray,
+    mount: np.ndarray,
+    params: SmcParams,
+    warnings: list[str],
+    *,
+    poi: str | None = None,
+) -> Smc:
+    """A fragment that drives the base: the room's colours and the salient scan at its start
+    (its lidar pose from odometry ``base`` (B, 3) at times ``base_t``), the base ``path``
+    (T, 4) ``[x, y, 0, yaw]`` at times ``t`` as a DMP with its goal in the scan's frame."""
+    name = log.path.name
+    frame = _frame_at(log.frames, frag.t0)
+    if frame is None:
+        raise LogError(f"{name}: no camera frame near t={frag.t0:.2f} s")
+    room = room_histogram(frame.rgb, params.perception)
     scans_t = np.array([sc.t for sc in log.scans])
+    i = int(np.searchsorted(scans_t, frag.t0 - 1e-6))
+    if i >= len(scans_t) or scans_t[i] - frag.t0 > 0.2:
+        raise LogError(f"{name}: no lidar scan within 0.2 s after t={frag.t0:.2f} s")
+    msg = log.scans[i]
+    scan = Scan2D.from_span(msg.ranges, msg.start_angle, msg.end_angle, LIDAR_RANGE_MAX)
+    lidar_pose = pose_compose(base[int(np.argmin(np.abs(base_t - msg.t)))], mount)
+    goal = path[-1]
+    salient = bool(np.hypot(goal[0] - lidar_pose[0], goal[1] - lidar_pose[1]) < params.scan_epsilon)
+    if not salient:
+        warnings.append(
+            f"{name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends farther than "
+            f"{params.scan_epsilon} m from where its scan was taken; its goal is stored "
+            "in odometry's frame"
+        )
+    action = action_in_scan_frame(t, path, lidar_pose if salient else None, params)
+    perception = SalientPerceptions(
+        cluster=None,
+        weight=None,
+        room=room,
+        scan=scan if salient else None,
+        scan_pose=lidar_pose if salient else None,
+    )
+    return Smc(perception=perception, action=replace(action, poi=poi))
+
+
+BASE_MOVED = (0.05, 0.1)
+"""A mobile manipulator's fragment drives the base when its base target moves this far
+[m] or turns this much [rad]."""
+HAND_MOVED = 0.02
+"""... and moves the hand when the hand's target in the base's frame moves this far [m]."""
+
+
+def _to_world(base: np.ndarray, hand: np.ndarray) -> np.ndarray:
+    """Hand poses ``[x, y, z, yaw]`` (N, 4) in the frames of bases ``[x, y, yaw]`` (N, 3)
+    -> in the world (odometry's frame)."""
+    c, s = np.cos(base[:, 2]), np.sin(base[:, 2])
+    x, y = hand[:, 0], hand[:, 1]
+    return np.column_stack(
+        [
+            base[:, 0] + c * x - s * y,
+            base[:, 1] + s * x + c * y,
+            hand[:, 2],
+            hand[:, 3] + base[:, 2],
+        ]
+    )
+
+
+def _mobile_manipulator_smcs(
+    log: Log, frags: Sequence[Fragment], scene: Scene, params: SmcParams, warnings: list[str]
+) -> list[Smc]:
+    """The SMCs of a mobile manipulator's fragments (paper 5.3, DESIGN.md 9), by what moved:
+
+    - the base only (navigation): as a mobile base's, room colours and scan (SI, SL), the
+      base path as the DMP (``poi="base"``); the hand rides along;
+    - the hand (manipulation), the base standing: the object clusters of the RGB-D frame
+      (ML) in odometry's frame, the hand's path in that frame as the DMP, its goal in the
+      salient object's frame (``poi="hand"``);
+    - both (pulling a door while backing up): as manipulation, plus the base's path as a
+      second DMP of the same duration, its goal in the same object's frame.
+
+    The salient object of a manipulation is the cluster nearest the hand where the action
+    ends, else where it starts (what it pulls or carries), within epsilon.
+    """
+    name = log.path.name
+    if not len(log.base_t):
+        raise LogError(
+            f"{log.path}: no /robot/base; a mobile manipulator's log needs its base pose"
+        )
+    mount = lidar_mount(scene.model(), None, _lidar_site(log, scene))
+    robot = robot_model_of(log)
+    hand_world = _to_world(
+        log.base[np.clip(np.searchsorted(log.base_t, log.poi_t), 0, len(log.base_t) - 1)],
+        log.poi,
+    )
     smcs: list[Smc] = []
+    held = 0.0
     for k, frag in enumerate(frags):
+        cmds = _commands(log, frag)
+        t = np.array([c.t for c in cmds]) - cmds[0].t
+        if any(c.base is None for c in cmds):
+            raise LogError(
+                f"{name}: a command at t={frag.t0:.2f}-{frag.t1:.2f} s has no base target"
+            )
+        base = np.array([c.base for c in cmds], dtype=float)
+        base[:, 2] = np.unwrap(base[:, 2])
+        hand = np.array([c.target for c in cmds], dtype=float)
+        base_path = np.column_stack([base[:, :2], np.zeros(len(base)), base[:, 2]])
+        drives = bool(
+            np.linalg.norm(base[-1, :2] - base[0, :2]) > BASE_MOVED[0]
+            or abs(base[-1, 2] - base[0, 2]) > BASE_MOVED[1]
+        )
+        reaches = bool(np.linalg.norm(hand[-1, :3] - hand[0, :3]) > HAND_MOVED)
+        if drives and not reaches:
+            smcs.append(
+                _navigation_smc(
+                    log,
+                    k,
+                    frag,
+                    t,
+                    base_path,
+                    log.base_t,
+                    log.base,
+                    mount,
+                    params,
+                    warnings,
+                    poi="base",
+                )
+            )
+            continue
         frame = _frame_at(log.frames, frag.t0)
         if frame is None:
             raise LogError(f"{name}: no camera frame near t={frag.t0:.2f} s")
-        room = room_histogram(frame.rgb, params.perception)
-        i = int(np.searchsorted(scans_t, frag.t0 - 1e-6))
-        if i >= len(scans_t) or scans_t[i] - frag.t0 > 0.2:
-            raise LogError(f"{name}: no lidar scan within 0.2 s after t={frag.t0:.2f} s")
-        msg = log.scans[i]
-        scan = Scan2D.from_span(msg.ranges, msg.start_angle, msg.end_angle, LIDAR_RANGE_MAX)
-        poi = log.poi[int(np.argmin(np.abs(log.poi_t - msg.t)))]
-        lidar_pose = pose_compose(np.array([poi[0], poi[1], poi[3]]), mount)
-        goal = log.poi[int(np.argmin(np.abs(log.poi_t - frag.t1)))]
-        salient = bool(
-            np.hypot(goal[0] - lidar_pose[0], goal[1] - lidar_pose[1]) < params.scan_epsilon
+        clusters = clusters_from_frame(frame, geometry_at(robot, log, frame.t), params.perception)
+        ends = [hand_world[int(np.argmin(np.abs(log.poi_t - tt)))][:3] for tt in (frag.t1, frag.t0)]
+        idx = salient_cluster(clusters, ends[0], params.epsilon)
+        if idx is None:
+            idx = salient_cluster(clusters, ends[1], params.epsilon)
+        cluster = None if idx is None else clusters[idx]
+        grip = np.array([c.gripper for c in cmds])
+        action = action_from_path(
+            t, _to_world(base, hand), grip, cluster, params, held_symmetry=held
         )
-        if not salient:
+        action = replace(action, poi="hand")
+        if drives:
+            from smccli.learn import dmp as dmp_mod
+            from smccli.learn.smc import goal_in_object
+
+            end = base_path[-1].copy()
+            base_goal = end if cluster is None else goal_in_object(end, cluster)
+            action = replace(
+                action, base_dmp=dmp_mod.fit(t, base_path, params.dmp), base_goal=base_goal
+            )
+        if action.event == "close":
+            held = cluster.yaw_period if cluster is not None else 0.0
+        elif action.event == "open":
+            held = 0.0
+        if cluster is None:
             warnings.append(
-                f"{name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends farther than "
-                f"{params.scan_epsilon} m from where its scan was taken; its goal is stored "
-                "in odometry's frame"
+                f"{name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends and starts "
+                f"with no object within {params.epsilon} m of the hand; its goal is stored in "
+                "odometry's frame"
             )
-        cmds = [c for c in log.commands if frag.t0 - 1e-6 <= c.t <= frag.t1 + 1e-6]
-        if len(cmds) < 3:
-            raise LogError(
-                f"{name}: fragment {frag.t0:.2f}-{frag.t1:.2f} s holds fewer than 3 commands"
-            )
-        t = np.array([c.t for c in cmds]) - cmds[0].t
-        path = np.array([c.target for c in cmds], dtype=float)
-        action = action_in_scan_frame(t, path, lidar_pose if salient else None, params)
-        perception = SalientPerceptions(
-            cluster=None,
-            weight=None,
-            room=room,
-            scan=scan if salient else None,
-            scan_pose=lidar_pose if salient else None,
-        )
-        smcs.append(Smc(perception=perception, action=action))
+        smcs.append(Smc(perception=SalientPerceptions(cluster=cluster, weight=None), action=action))
     return smcs
 
 
@@ -290,6 +442,8 @@ def _required_topics(log: Log, scene: Scene | None = None) -> set[str]:
         except LogError:
             scene = None
     if scene is not None and scene.robot.base is not None:
+        if scene.robot.arm_joints:  # a mobile manipulator: both, and its base pose
+            return set(BASE_TOPICS) | REQUIRED_TOPICS | {"/robot/base"}
         return set(BASE_TOPICS)
     needed = set(REQUIRED_TOPICS)
     if log.metadata.get("has_scale") == "true":

@@ -89,6 +89,15 @@ class Action:
     """Symmetry [rad] of the object held during the action (the one grasped by the chain's
     previous action), as ``symmetry``; 0 when nothing asymmetric is held. A held object
     without symmetry (2 pi) must not be turned by the gripper's pi."""
+    poi: str | None = None
+    """A mobile manipulator's: the POI ``dmp`` drives, ``"hand"`` (the end effector in the
+    world, i.e. odometry's frame) or ``"base"`` (``[x, y, 0, yaw]``); None for a robot with
+    one POI (DESIGN.md 9)."""
+    base_dmp: Dmp | None = None
+    """A mobile manipulator's base path ``[x, y, 0, yaw]`` over the same fragment when hand
+    and base both moved (pulling a door while backing up): two DMPs, one duration."""
+    base_goal: np.ndarray | None = None
+    """That path's goal ``[dx, dy, 0, dyaw]`` in ``goal``'s frame [m, rad], shape (4,)."""
 
     @property
     def event(self) -> str:
@@ -357,7 +366,7 @@ def smc_to_dict(smc: Smc) -> tuple[dict[str, Any], dict[str, Any]]:
         perception["room"] = _to_json(p.room)
         perception["scan"] = None if p.scan is None else scan_to_dict(p.scan)
         perception["scan_pose"] = None if p.scan_pose is None else _to_json(p.scan_pose)
-    action = {
+    action: dict[str, Any] = {
         "event": a.event,
         "goal_frame": a.goal_frame,
         "goal": _to_json(a.goal),
@@ -369,6 +378,11 @@ def smc_to_dict(smc: Smc) -> tuple[dict[str, Any], dict[str, Any]]:
         "approach": _to_json(a.approach),
         "dmp": dmp_mod.to_dict(a.dmp),
     }
+    if a.poi is not None:  # a mobile manipulator's; other trees keep their keys
+        action["poi"] = a.poi
+    if a.base_dmp is not None and a.base_goal is not None:
+        action["base_dmp"] = dmp_mod.to_dict(a.base_dmp)
+        action["base_goal"] = _to_json(a.base_goal)
     return perception, action
 
 
@@ -394,5 +408,10 @@ def smc_from_dict(perception: dict[str, Any], action: dict[str, Any]) -> Smc:
             symmetry=float(action["symmetry"]),
             held_symmetry=float(action["held_symmetry"]),
             approach=np.asarray(action["approach"], dtype=float).reshape(-1, 3),
+            poi=None if action.get("poi") is None else str(action["poi"]),
+            base_dmp=None if "base_dmp" not in action else dmp_mod.from_dict(action["base_dmp"]),
+            base_goal=(
+                None if "base_goal" not in action else np.asarray(action["base_goal"], float)
+            ),
         ),
     )

@@ -107,13 +107,15 @@ class Lidar:
         )
 
 
-def lidar_mount(model: mujoco.MjModel, poi_site: str, lidar_site: str) -> np.ndarray:
+def lidar_mount(model: mujoco.MjModel, poi_site: str | None, lidar_site: str) -> np.ndarray:
     """Where the lidar sits on the robot: its planar pose ``[x, y, yaw]`` in the POI's frame
-    [m, m, rad], from the model at its reference configuration (both sites ride the base)."""
+    [m, m, rad], from the model at its reference configuration (both sites ride the base).
+    ``poi_site`` None: in the model's frame, which is a mobile manipulator's base frame at
+    the reference configuration (its hand's POI does not ride the base rigidly)."""
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)
-    poses = []
-    for name in (poi_site, lidar_site):
+    poses = [(np.zeros(2), 0.0)] if poi_site is None else []
+    for name in (lidar_site,) if poi_site is None else (poi_site, lidar_site):
         i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
         if i < 0:
             raise SceneError(f"model has no site {name!r}")
