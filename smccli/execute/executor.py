@@ -47,7 +47,7 @@ from smccli.execute.sensing import Sensors
 from smccli.learn.tree import Edge, Tree
 from smccli.perception import Cluster, scale_reading
 from smccli.perception.scan import align_scans, pose_to_se2, se2_to_pose
-from smccli.world.sensors import CameraFrame, PoiCommand
+from smccli.world.sensors import CameraFrame, PoiCommand, hand_in_base, hand_in_world
 
 __all__ = [
     "ARRIVAL_TOLERANCE",
@@ -135,7 +135,16 @@ class TreeExecutor:
         self.max_time = max_time
         self.policy = TreePolicy(tree, sensors.robot, sensors.model)
         """Decides; the executor only reads the sensors and streams the plans."""
-        self._last_cmd = PoiCommand(sensors.t, sensors.poi(), 1.0)
+        self._last_cmd = PoiCommand(
+            sensors.t,
+            sensors.poi(),
+            1.0,
+            base=sensors.base() if sensors.mobile_manipulator else None,
+        )
+        self._plan_poi: str | None = None
+        """The plan being streamed drives a mobile manipulator's ``hand`` or ``base``."""
+        self._base_path: np.ndarray | None = None
+        """Its base targets on the hand's clock (n, 4), when both move."""
         self._weights: deque[tuple[float, float]] = deque()
         """Recent scale readings (t [s], kg), the last ``weight_window`` of them."""
 
@@ -147,6 +156,24 @@ class TreeExecutor:
         t = s.t
         t0 = time.perf_counter()
         frame = s.render_camera()
+        if s.mobile_manipulator:  # every reading: a node decides as a base or as an arm
+            scan, lidar_pose, geometry, base = (
+                s.lidar(),
+                s.lidar_pose(),
+                s.robot_geometry(),
+                s.base(),
+            )
+            acquire_s = time.perf_counter() - t0
+            obs = Observation(
+                t=t,
+                poi=hand_in_world(base, s.poi()),
+                camera=frame,
+                robot_geometry=geometry,
+                scan=scan,
+                lidar_pose=lidar_pose,
+                base=base,
+            )
+            return obs, frame, acquire_s
         if s.has_lidar:
             scan, lidar_pose = s.lidar(), s.lidar_pose()
             acquire_s = time.perf_counter() - t0
@@ -183,7 +210,34 @@ class TreeExecutor:
     def hold(self) -> None:
         """Repeat the last command for one control period."""
         c = self._last_cmd
-        self._send(PoiCommand(self.sensors.t, c.target, c.gripper))
+        self._send(PoiCommand(self.sensors.t, c.target, c.gripper, base=c.base))
+
+    def _cmd(self, pose: np.ndarray, grip: float, i: int | None = None) -> PoiCommand:
+        """The command for a plan's pose ``pose`` (its ``i``-th; None: the goal). A mobile
+        manipulator's hand pose goes out in the frame of the base's target of the same
+        tick; a base pose moves the base, the hand's target riding along."""
+        s, last = self.sensors, self._last_cmd
+        if not s.mobile_manipulator:
+            return PoiCommand(s.t, pose, grip)
+        if self._plan_poi == "base":
+            return PoiCommand(s.t, last.target, grip, base=np.asarray(pose)[[0, 1, 3]])
+        base = last.base
+        if self._base_path is not None:
+            row = self._base_path[-1 if i is None else min(i, len(self._base_path) - 1)]
+            base = row[[0, 1, 3]]
+        assert base is not None
+        return PoiCommand(s.t, hand_in_base(base, pose), grip, base=base)
+
+    def _poi_now(self) -> np.ndarray:
+        """The POI the plan drives, now: a mobile manipulator's hand in odometry's frame, or
+        its base ``[x, y, 0, yaw]``."""
+        s = self.sensors
+        if not s.mobile_manipulator:
+            return s.poi()
+        b = s.base()
+        if self._plan_poi == "base":
+            return np.array([b[0], b[1], 0.0, b[2]])
+        return hand_in_world(b, s.poi())
 
     def _send(self, cmd: PoiCommand) -> None:
         self._last_cmd = cmd
@@ -207,20 +261,21 @@ class TreeExecutor:
         t0 = s.t
         opening0 = s.gripper_opening()
         grip, end, path, goal = plan.gripper_start, plan.gripper_end, plan.poses, plan.goal
+        self._plan_poi, self._base_path = plan.poi, plan.base_poses
         # A gripper switch inside the fragment (e.g. grasp, then lift): stream the rollout to
         # that phase, hold there while the fingers move, then go on with the new opening.
         midway = plan.midway
         k = len(path) - 1 if plan.switch_index is None or not midway else plan.switch_index
         if plan.scan_alignment is not None:
-            goal = self._stream_relocalized(edge, path, goal, plan.scan_alignment)
+            goal = self._stream_relocalized(edge, path, goal, plan.scan_alignment, grip)
         else:
-            for y in path[1 : k + 1]:
-                self._send(PoiCommand(s.t, y, grip))
+            for i in range(1, k + 1):
+                self._send(self._cmd(path[i], grip, i))
         if midway:
-            self._arrive(path[k], grip)
-            self._gripper_event(path[k], end)
-            for y in path[k + 1 :]:
-                self._send(PoiCommand(s.t, y, end))
+            self._arrive(path[k], grip, k)
+            self._gripper_event(path[k], end, k)
+            for i in range(k + 1, len(path)):
+                self._send(self._cmd(path[i], end, i))
             grip = end
         arrived = self._arrive(goal, grip)
         if a.event != "none" and not midway:
@@ -236,7 +291,7 @@ class TreeExecutor:
         )
 
     def _stream_relocalized(
-        self, edge: Edge, path: np.ndarray, goal: np.ndarray, T0: np.ndarray
+        self, edge: Edge, path: np.ndarray, goal: np.ndarray, T0: np.ndarray, grip: float = 1.0
     ) -> np.ndarray:
         """Stream a base's rollout ``path`` (n, 4) while tracking the stored scan: every
         RELOCALIZE_PERIOD the current scan is aligned to it from odometry's prediction; the
@@ -251,7 +306,7 @@ class TreeExecutor:
         next_fix = s.t + RELOCALIZE_PERIOD
         i = 1
         while i < len(path):
-            self._send(PoiCommand(s.t, path[i], 1.0))
+            self._send(self._cmd(path[i], grip, i))
             i += 1
             if s.t < next_fix - 1e-9:
                 continue
@@ -275,21 +330,22 @@ class TreeExecutor:
             D = D_new
         return goal
 
-    def _arrive(self, target: np.ndarray, grip: float) -> bool:
-        """Hold ``target`` until the POI is within the tolerance (at most MAX_HOLD)."""
+    def _arrive(self, target: np.ndarray, grip: float, i: int | None = None) -> bool:
+        """Hold ``target`` (the plan's ``i``-th pose) until the POI is within the tolerance
+        (at most MAX_HOLD)."""
         s = self.sensors
         for _ in range(round(MAX_HOLD / s.control_period)):
-            if np.linalg.norm(s.poi()[:3] - target[:3]) < ARRIVAL_TOLERANCE:
+            if np.linalg.norm(self._poi_now()[:3] - target[:3]) < ARRIVAL_TOLERANCE:
                 return True
-            self._send(PoiCommand(s.t, target, grip))
-        return bool(np.linalg.norm(s.poi()[:3] - target[:3]) < ARRIVAL_TOLERANCE)
+            self._send(self._cmd(target, grip, i))
+        return bool(np.linalg.norm(self._poi_now()[:3] - target[:3]) < ARRIVAL_TOLERANCE)
 
-    def _gripper_event(self, target: np.ndarray, opening: float) -> None:
+    def _gripper_event(self, target: np.ndarray, opening: float, i: int | None = None) -> None:
         """Command ``opening`` and wait until the fingers stop, as the scripted operator."""
         s = self.sensors
         still, t_ev = 0, s.t
         while True:
-            self._send(PoiCommand(s.t, target, opening))
+            self._send(self._cmd(target, opening, i))
             still = 0 if abs(s.gripper_speed()) > 0.02 else still + 1
             el = s.t - t_ev
             if (el > 0.15 and still >= 10) or el > 3.0:

@@ -41,7 +41,7 @@ from smccli.perception.room import d_room, room_histogram
 from smccli.perception.scan import Scan2D, align_scans, chamfer, map_goal
 from smccli.world.controller import reachable, wrap
 from smccli.world.robot import Robot
-from smccli.world.sensors import CameraFrame, RobotGeometry
+from smccli.world.sensors import CameraFrame, RobotGeometry, hand_in_base
 
 CONTROL_PERIOD = 0.01
 """Default control period of a plan's trajectory [s] (the simulator's)."""
@@ -287,11 +287,17 @@ class Observation:
     lidar_pose: np.ndarray | None = None
     """The lidar's pose ``[x, y, yaw]`` in odometry's frame when the scan was taken
     [m, m, rad]. Needed with ``scan``: it maps a goal stored relative to the taught scan."""
+    base: np.ndarray | None = None
+    """A mobile manipulator's base pose ``[x, y, yaw]`` from odometry [m, m, rad]; its
+    ``poi`` is then the hand in odometry's frame (this pose composed with the hand in the
+    base's frame, :func:`smccli.world.sensors.hand_in_world`)."""
 
     def __post_init__(self) -> None:
         self._vector("poi", "[x, y, z, yaw]")
         if self.lidar_pose is not None:
             self._vector("lidar_pose", "[x, y, yaw]")
+        if self.base is not None:
+            self._vector("base", "[x, y, yaw]")
 
     def _vector(self, name: str, form: str) -> None:
         """Store field ``name`` as float64, or SmcError unless it holds ``form``'s finite
@@ -359,6 +365,13 @@ class Plan:
     scan_alignment: np.ndarray | None = None
     """A mobile base's scan-frame goal: the current lidar in the taught lidar's frame, the
     SE(2) transform (3, 3) that mapped the goal (for correcting the goal while driving)."""
+    poi: str | None = None
+    """A mobile manipulator's: what ``poses`` drive, ``"hand"`` (the hand in odometry's
+    frame; send each in the frame of the base's target of the same tick) or ``"base"``
+    (the base ``[x, y, 0, yaw]``; the hand rides along). None: the robot's one POI."""
+    base_poses: np.ndarray | None = None
+    """A mobile manipulator's hand plan that also drives the base: (n, 4) base targets
+    ``[x, y, 0, yaw]`` on the same clock as ``poses`` (two DMPs, one duration)."""
 
     @property
     def midway(self) -> bool:
@@ -404,6 +417,9 @@ class TreePolicy:
         self.model = model
         self.has_lidar = any(s.type == "lidar" for s in robot.sensors)
         """The robot has a 2-D lidar: it decides as a mobile base (room colours, scans)."""
+        self.mobile_manipulator = robot.base is not None and bool(robot.arm_joints)
+        """Base and arm: a node whose SMCs hold room colours decides as a base, the others
+        as an arm (object clusters)."""
         self._edges = {e.id: e for e in tree.edges}
         self._stacks: dict[tuple[str, ...], EdgeStack] = {}
         self._scan_alignment: dict[str, np.ndarray] = {}
@@ -487,11 +503,32 @@ class TreePolicy:
                 reason=f"no contingent SMC at node {nodes[0]} (T_hP={self.params.t_hp}): {best}",
             )
         a = edge.smc.action
-        start = obs.poi
+        base_now = None
+        if a.poi is not None:
+            if obs.base is None:
+                raise SmcError(
+                    f"observation at t={obs.t:.3f} s has no base: SMC {edge.id} drives a mobile "
+                    "manipulator (Observation.base)"
+                )
+            base_now = np.array([obs.base[0], obs.base[1], 0.0, obs.base[2]])
+        start = base_now if a.poi == "base" else obs.poi
+        assert start is not None
         goal = self.map_goal(a, cluster, start, edge.id, obs.lidar_pose)
         duration = action_duration(a, start, goal)
         dec = replace(dec, mapped_goal=goal, duration=duration)
-        if self.model is not None and not reachable(self.model, self.robot, goal):
+        base_goal = None
+        if a.base_dmp is not None and a.base_goal is not None and base_now is not None:
+            base_goal = self._map_base_goal(a, cluster, base_now)
+        # A mobile manipulator's hand goal is reached from where its base will stand.
+        hand_goal = goal
+        if base_now is not None and a.poi == "hand":
+            stand = base_now if base_goal is None else base_goal
+            hand_goal = hand_in_base(stand[[0, 1, 3]], goal)
+        if (
+            self.model is not None
+            and a.poi != "base"
+            and not reachable(self.model, self.robot, hand_goal)
+        ):
             return Plan(
                 decision=dec,
                 edge=edge.id,
@@ -503,13 +540,13 @@ class TreePolicy:
                 reason=f"edge {edge.id}: goal [{goal[0]:.3f}, {goal[1]:.3f}, {goal[2]:.3f}] m, "
                 f"yaw {goal[3]:.2f} rad is out of reach",
             )
-        times, poses = rollout(
-            a.dmp,
-            start=start,
-            goal=goal,
-            duration=duration,
-            n_steps=max(2, round(duration / control_period)) + 1,
-        )
+        n_steps = max(2, round(duration / control_period)) + 1
+        times, poses = rollout(a.dmp, start=start, goal=goal, duration=duration, n_steps=n_steps)
+        base_poses = None
+        if base_goal is not None and base_now is not None and a.base_dmp is not None:
+            _, base_poses = rollout(
+                a.base_dmp, start=base_now, goal=base_goal, duration=duration, n_steps=n_steps
+            )
         n = len(poses)
         switch: int | None = None
         if a.event != "none":
@@ -530,6 +567,8 @@ class TreePolicy:
             event=a.event,
             duration=duration,
             scan_alignment=self._scan_alignment.get(edge.id) if a.goal_frame == "scan" else None,
+            poi=a.poi,
+            base_poses=base_poses,
         )
 
     def match(
@@ -538,7 +577,10 @@ class TreePolicy:
         """C_Now of ``obs`` against the children of ``nodes`` (default the frontier): the
         decision (no goal mapped yet), the chosen edge and the context cluster it matched."""
         nodes = self._nodes if nodes is None else nodes
-        if self.has_lidar:
+        if self.has_lidar and (
+            not self.mobile_manipulator
+            or any(e.smc.perception.room is not None for e in self.stack(nodes).edges)
+        ):
             dec, edge = self._match_base(obs, nodes)
             return dec, edge, None
         stack = self.stack(nodes)
@@ -649,6 +691,21 @@ class TreePolicy:
                 f"match on {what} (Observation.{name})"
             )
 
+    def _map_base_goal(
+        self, a: Action, cluster: Cluster | None, base_now: np.ndarray
+    ) -> np.ndarray:
+        """Where a mobile manipulator's base goes while its hand acts (``a.base_goal``): in
+        the salient object's frame, the object's yaw taken nearest the base's heading (a
+        base does not turn round with an elongated handle's symmetry); else as taught."""
+        assert a.base_goal is not None
+        if a.goal_frame == "object" and cluster is not None:
+            g = goal_from_object(a.base_goal, cluster, near_yaw=float(base_now[3]), flip=False)
+            g[2] = 0.0
+        else:
+            g = np.array(a.base_goal, dtype=float)
+        g[3] = base_now[3] + wrap(float(g[3] - base_now[3]))
+        return g
+
     def map_goal(
         self,
         action: Action,
@@ -671,7 +728,7 @@ class TreePolicy:
             T = self._scan_alignment[edge]
             x, y, yaw = map_goal(action.goal[[0, 1, 3]], T, lidar_pose)
             return np.array([x, y, 0.0, start[3] + wrap(float(yaw - start[3]))])
-        if self.robot.gripper is None:  # a base's world goal: its heading as taught
+        if self.robot.gripper is None or action.poi == "base":  # a base's world goal
             goal = np.array(action.goal, dtype=float)
             goal[3] = start[3] + wrap(float(goal[3] - start[3]))
             return goal

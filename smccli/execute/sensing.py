@@ -37,6 +37,9 @@ class Sensors:
         """The scene has a scale under the table."""
         self.has_lidar = sim.lidar_pose() is not None
         """The robot has a 2-D lidar."""
+        self.mobile_manipulator = sim.mobile_manipulator
+        """A base and an arm: :meth:`poi` is the hand in the base's frame, :meth:`base` the
+        base's pose."""
 
     @property
     def t(self) -> float:
@@ -50,8 +53,12 @@ class Sensors:
             self._on_step(cmd)
 
     def poi(self) -> np.ndarray:
-        """POI ``[x, y, z, yaw]`` [m, m, m, rad]."""
+        """POI ``[x, y, z, yaw]`` [m, m, m, rad] (a mobile manipulator's: in its base's frame)."""
         return self._sim.poi()
+
+    def base(self) -> np.ndarray:
+        """A mobile base's pose ``[x, y, yaw]`` from odometry [m, m, rad]."""
+        return self._sim.base_odometry()
 
     def gripper_opening(self) -> float:
         """Finger opening over its maximum, in [0, 1]."""

@@ -40,7 +40,7 @@ from smccli.world.lidar import RANGE_MAX as LIDAR_RANGE_MAX
 from smccli.world.lidar import lidar_mount
 from smccli.world.robot import Robot
 from smccli.world.scene import Scene, robot_identity, scene_of_log, sensor_identity
-from smccli.world.sensors import CameraFrame
+from smccli.world.sensors import CameraFrame, hand_in_world
 
 #: Topics every arm log must hold for compile.
 REQUIRED_TOPICS = {
@@ -261,6 +261,7 @@ def _navigation_smc(
     warnings: list[str],
     *,
     poi: str | None = None,
+    grip: float = 1.0,
 ) -> Smc:
     """A fragment that drives the base: the room's colours and the salient scan at its start
     (its lidar pose from odometry ``base`` (B, 3) at times ``base_t``), the base ``path``
@@ -293,7 +294,9 @@ def _navigation_smc(
         scan=scan if salient else None,
         scan_pose=lidar_pose if salient else None,
     )
-    return Smc(perception=perception, action=replace(action, poi=poi))
+    if poi is not None:  # a mobile manipulator's hand keeps what it holds while driving
+        action = replace(action, poi=poi, gripper_start=grip, gripper_end=grip)
+    return Smc(perception=perception, action=action)
 
 
 BASE_MOVED = (0.05, 0.1)
@@ -301,21 +304,6 @@ BASE_MOVED = (0.05, 0.1)
 [m] or turns this much [rad]."""
 HAND_MOVED = 0.02
 """... and moves the hand when the hand's target in the base's frame moves this far [m]."""
-
-
-def _to_world(base: np.ndarray, hand: np.ndarray) -> np.ndarray:
-    """Hand poses ``[x, y, z, yaw]`` (N, 4) in the frames of bases ``[x, y, yaw]`` (N, 3)
-    -> in the world (odometry's frame)."""
-    c, s = np.cos(base[:, 2]), np.sin(base[:, 2])
-    x, y = hand[:, 0], hand[:, 1]
-    return np.column_stack(
-        [
-            base[:, 0] + c * x - s * y,
-            base[:, 1] + s * x + c * y,
-            hand[:, 2],
-            hand[:, 3] + base[:, 2],
-        ]
-    )
 
 
 def _mobile_manipulator_smcs(
@@ -341,7 +329,7 @@ def _mobile_manipulator_smcs(
         )
     mount = lidar_mount(scene.model(), None, _lidar_site(log, scene))
     robot = robot_model_of(log)
-    hand_world = _to_world(
+    hand_world = hand_in_world(
         log.base[np.clip(np.searchsorted(log.base_t, log.poi_t), 0, len(log.base_t) - 1)],
         log.poi,
     )
@@ -391,7 +379,7 @@ def _mobile_manipulator_smcs(
         cluster = None if idx is None else clusters[idx]
         grip = np.array([c.gripper for c in cmds])
         action = action_from_path(
-            t, _to_world(base, hand), grip, cluster, params, held_symmetry=held
+            t, hand_in_world(base, hand), grip, cluster, params, held_symmetry=held
         )
         action = replace(action, poi="hand")
         if drives:

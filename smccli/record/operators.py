@@ -24,7 +24,7 @@ from smccli.errors import ScriptError
 from smccli.schemas import SchemaProblem, YamlDocument, check_yaml, key_path, parse_yaml
 from smccli.world.controller import reachable, wrap
 from smccli.world.scene import ROBOT_KEY, Layout, Scene, nominal_layout, sample_layout
-from smccli.world.sensors import PoiCommand, SaliencyMark
+from smccli.world.sensors import PoiCommand, SaliencyMark, hand_in_base, hand_in_world
 from smccli.world.sim import Sim
 
 TREMOR_TIME_CONSTANT = 0.15
@@ -353,10 +353,10 @@ class ScriptOperator:
             b1[2] = b0[2] + wrap(float(b1[2] - b0[2]))
         act.base_start, act.base_goal = b0, b1
         if step.place is None:  # the hand moves in the world
-            act.world_start = _to_world(b0, self._target)
+            act.world_start = hand_in_world(b0, self._target)
             act.world_goal = self._goal(step, base=b1)
             act.world_goal[3] = act.world_start[3] + wrap(act.world_goal[3] - act.world_start[3])
-            act.goal = _to_base(b1, act.world_goal)
+            act.goal = hand_in_base(b1, act.world_goal)
         else:  # it rides with the base
             act.goal = self._target.copy()
         act.start = self._target.copy()
@@ -408,7 +408,7 @@ class ScriptOperator:
         # The gripper is symmetric under a half turn: take the yaw (mod π) nearest the
         # wrist's comfortable yaw, which points along the arm (base yaw = atan2(y, x), in
         # the base's frame for a mobile manipulator).
-        local = goal if base is None else _to_base(base, goal)
+        local = goal if base is None else hand_in_base(base, goal)
         comfort = math.atan2(local[1], local[0]) + (0.0 if base is None else float(base[2]))
         goal[3] = comfort + wrap(2 * (goal[3] - comfort)) / 2
         return goal
@@ -432,7 +432,7 @@ class ScriptOperator:
             self._base = act.base_start + s * (act.base_goal - act.base_start)
             if act.world_start is not None and act.world_goal is not None:
                 hand = act.world_start + s * (act.world_goal - act.world_start)
-                self._target = _to_base(self._base, hand)
+                self._target = hand_in_base(self._base, hand)
         else:
             self._target = act.start + s * (act.goal - act.start)
         if tau < 1.0:
@@ -442,26 +442,6 @@ class ScriptOperator:
             odom = self.sim.base_odometry()
             arrived = arrived and float(np.linalg.norm(odom[:2] - act.base_goal[:2])) < 0.01
         return bool(arrived or tau * act.duration > act.duration + 1.0)
-
-
-def _to_base(base: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """A world pose ``[x, y, z, yaw]`` in the frame of a base at ``[x, y, yaw]``."""
-    c, s = math.cos(base[2]), math.sin(base[2])
-    dx, dy = pose[0] - base[0], pose[1] - base[1]
-    return np.array([c * dx + s * dy, -s * dx + c * dy, pose[2], pose[3] - base[2]])
-
-
-def _to_world(base: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """A pose ``[x, y, z, yaw]`` in the frame of a base at ``[x, y, yaw]``, in the world."""
-    c, s = math.cos(base[2]), math.sin(base[2])
-    return np.array(
-        [
-            base[0] + c * pose[0] - s * pose[1],
-            base[1] + s * pose[0] + c * pose[1],
-            pose[2],
-            pose[3] + base[2],
-        ]
-    )
 
 
 def run_script(script: Script, sim: Sim, seed: int = 0, *, max_time: float = 600.0):
