@@ -22,7 +22,7 @@ import numpy as np
 
 from smccli.errors import ScriptError
 from smccli.schemas import SchemaProblem, YamlDocument, check_yaml, key_path, parse_yaml
-from smccli.world.controller import reachable, wrap
+from smccli.world.controller import home_poi, reachable, wrap
 from smccli.world.scene import ROBOT_KEY, Layout, Scene, nominal_layout, sample_layout
 from smccli.world.sensors import PoiCommand, SaliencyMark, hand_in_base, hand_in_world
 from smccli.world.sim import Sim
@@ -66,6 +66,8 @@ class Step:
     base: str | tuple[float, float, float] | None = None
     """move_to of a mobile manipulator: where its base goes in the same move (a place's
     name or ``(x, y, yaw)``); None: the base stays."""
+    home: bool = False
+    """move_to from a ``home`` step: the hand to the robot's home posture (base frame)."""
 
     def where(self, source: str) -> str:
         return f"{source}: step {self.index} (line {self.line}, {self.kind})"
@@ -190,6 +192,9 @@ def _step(raw: dict[str, Any], index: int, line: int) -> Step:
         spec = {"place": value} if isinstance(value, str) else value
         duration = float(spec["duration"]) if "duration" in spec else None
         return Step("move_to", index, line, place=str(spec["place"]), duration=duration)
+    if kind == "home":
+        duration = None if not value or "duration" not in value else float(value["duration"])
+        return Step("move_to", index, line, home=True, duration=duration)
     if kind == "gripper":
         opening = {"open": 1.0, "close": 0.0}.get(value, value)
         return Step(kind, index, line, gripper=float(opening))
@@ -314,7 +319,7 @@ class ScriptOperator:
             return act
         if self._base is not None:
             return self._start_mobile(act)
-        goal = self._goal(step)
+        goal = self._home() if step.home else self._goal(step)
         if not reachable(self.sim.model, self.sim.robot, goal):
             raise ScriptError(
                 f"{step.where(self.script.source)}: target "
@@ -352,7 +357,10 @@ class ScriptOperator:
             b1 = np.array(self.sim.scene.place(where) if isinstance(where, str) else where)
             b1[2] = b0[2] + wrap(float(b1[2] - b0[2]))
         act.base_start, act.base_goal = b0, b1
-        if step.place is None:  # the hand moves in the world
+        if step.home:  # the hand to its home posture in the base's frame, the base still
+            act.goal = self._home()
+            act.goal[3] = self._target[3] + wrap(float(act.goal[3] - self._target[3]))
+        elif step.place is None:  # the hand moves in the world
             act.world_start = hand_in_world(b0, self._target)
             act.world_goal = self._goal(step, base=b1)
             act.world_goal[3] = act.world_start[3] + wrap(act.world_goal[3] - act.world_start[3])
@@ -387,6 +395,10 @@ class ScriptOperator:
         act.duration = duration * (scale if step.duration is None else 1.0)
         act.pause = pause if hesitate else 0.0
         return act
+
+    def _home(self) -> np.ndarray:
+        """The hand's pose at the robot's home posture, in the base's (model's) frame."""
+        return home_poi(self.sim.model, self.sim.robot)
 
     def _goal(self, step: Step, base: np.ndarray | None = None) -> np.ndarray:
         if step.place is not None:

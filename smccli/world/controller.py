@@ -239,3 +239,9 @@ def reachable(
         return False
     _, ok = CartesianController(model, robot).solve(target)
     return ok
+
+
+def home_poi(model: mujoco.MjModel, robot: Robot) -> np.ndarray:
+    """The POI ``[x, y, z, yaw]`` at the robot's home posture, in the model's frame (a
+    mobile manipulator's base frame: its base joints at zero)."""
+    return CartesianController(model, robot).forward(robot.home_array())
