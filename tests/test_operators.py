@@ -214,7 +214,7 @@ def test_scene_mismatch() -> None:
         (
             "  - {wait: 1, mark: a}\n",
             "step 0 (line 3): expected exactly one of the keys move_to, go_to, gripper, mark, "
-            "wait, found wait, mark",
+            "wait, home, found wait, mark",
         ),
         ("  - wait\n", "step 0 (line 3): expected a mapping with one of the keys move_to, "),
         ("  - wait: -1\n", "step 0 (line 3): wait: expected a number in [0, 60], found -1"),

@@ -327,7 +327,7 @@ def test_broken_scene_file_names_key_path_and_line(user_scene: Path, case: str) 
         (
             "robot: arm ",
             "robot: arms ",
-            "robot (line 7): no robot 'arms' (built-in robots: arm, base, panda",
+            "robot (line 7): no robot 'arms' (built-in robots: arm, base, mobile_panda, panda",
         ),
     ],
     ids=lambda v: v if len(v) < 30 else None,
