@@ -68,6 +68,8 @@ class Step:
     name or ``(x, y, yaw)``); None: the base stays."""
     home: bool = False
     """move_to from a ``home`` step: the hand to the robot's home posture (base frame)."""
+    hand: tuple[float, float, float] | None = None
+    """move_to ``hand``: a mobile manipulator's hand position in its base's frame [m]."""
 
     def where(self, source: str) -> str:
         return f"{source}: step {self.index} (line {self.line}, {self.kind})"
@@ -178,6 +180,11 @@ def _step(raw: dict[str, Any], index: int, line: int) -> Step:
                 if "position" in value
                 else None
             ),
+            hand=(
+                tuple(float(v) for v in value["hand"])  # type: ignore[arg-type]
+                if "hand" in value
+                else None
+            ),
             yaw=float(value["yaw"]) if "yaw" in value else (0.0 if "object" in value else None),
             duration=float(value["duration"]) if "duration" in value else None,
             base=(
@@ -253,9 +260,10 @@ class ScriptOperator:
                         f"{step.where(script.source)}: no place {place!r} in scene "
                         f"{sim.scene.name} (places: {', '.join(places) or 'none'})"
                     )
-            if step.base is not None and not sim.mobile_manipulator:
+            key = "base" if step.base is not None else "hand" if step.hand is not None else None
+            if key is not None and not sim.mobile_manipulator:
                 raise ScriptError(
-                    f"{step.where(script.source)}: base: moves a mobile manipulator's base; "
+                    f"{step.where(script.source)}: {key}: is for a mobile manipulator; "
                     f"scene {sim.scene.name}'s robot {sim.robot.name!r} is not one"
                 )
             # A mobile manipulator's operator also grasps the scene's furniture (a door's
@@ -357,9 +365,17 @@ class ScriptOperator:
             b1 = np.array(self.sim.scene.place(where) if isinstance(where, str) else where)
             b1[2] = b0[2] + wrap(float(b1[2] - b0[2]))
         act.base_start, act.base_goal = b0, b1
-        if step.home:  # the hand to its home posture in the base's frame, the base still
-            act.goal = self._home()
-            act.goal[3] = self._target[3] + wrap(float(act.goal[3] - self._target[3]))
+        if step.home or step.hand is not None:  # in the base's frame, the base still
+            if step.home:
+                act.goal = self._home()
+            else:
+                yaw = self._target[3] if step.yaw is None else step.yaw
+                act.goal = np.array([*step.hand, yaw])  # type: ignore[misc]
+            # The parallel gripper is symmetric under a half turn: the wrist turns the
+            # short way to either of the two yaws.
+            act.goal[3] = self._target[3] + math.remainder(
+                float(act.goal[3] - self._target[3]), math.pi
+            )
         elif step.place is None:  # the hand moves in the world
             act.world_start = hand_in_world(b0, self._target)
             act.world_goal = self._goal(step, base=b1)
@@ -422,6 +438,9 @@ class ScriptOperator:
         # the base's frame for a mobile manipulator).
         local = goal if base is None else hand_in_base(base, goal)
         comfort = math.atan2(local[1], local[0]) + (0.0 if base is None else float(base[2]))
+        if base is not None and self._gripper < 0.5 and self._base is not None:
+            # Holding a handle, a person turns the wrist with it, never round by half a turn.
+            comfort = float(hand_in_world(self._base, self._target)[3])
         goal[3] = comfort + wrap(2 * (goal[3] - comfort)) / 2
         return goal
 
@@ -442,10 +461,10 @@ class ScriptOperator:
         s = minimum_jerk(tau)
         if act.base_start is not None and act.base_goal is not None:
             self._base = act.base_start + s * (act.base_goal - act.base_start)
-            if act.world_start is not None and act.world_goal is not None:
-                hand = act.world_start + s * (act.world_goal - act.world_start)
-                self._target = hand_in_base(self._base, hand)
-        else:
+        if act.world_start is not None and act.world_goal is not None and self._base is not None:
+            hand = act.world_start + s * (act.world_goal - act.world_start)
+            self._target = hand_in_base(self._base, hand)
+        else:  # in the robot's frame (a go_to's hand rides along: start = goal)
             self._target = act.start + s * (act.goal - act.start)
         if tau < 1.0:
             return False
