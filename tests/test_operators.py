@@ -25,7 +25,8 @@ from smccli.world.sim import Sim
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = sorted((ROOT / "sample_logs").glob("*/*.yaml"))
-ARM_SAMPLES = [p for p in SAMPLES if p.parent.name != "rooms"]  # rooms: tests/test_rooms.py
+# rooms and loco_manip: tests/test_rooms.py, tests/test_loco_manip.py
+ARM_SAMPLES = [p for p in SAMPLES if p.parent.name not in ("rooms", "loco_manip")]
 EXPECTED_MARKS = {
     "demo1": ["grasp", "release"],
     "demo2": ["grasp", "release"],
@@ -38,7 +39,7 @@ EXPECTED_MARKS = {
 def test_sample_scripts_are_schema_valid() -> None:
     schema = load_schema("teleop_script")
     jsonschema.Draft202012Validator.check_schema(schema)
-    assert len(SAMPLES) == 8
+    assert len(SAMPLES) == 10
     for path in SAMPLES:
         jsonschema.validate(yaml.safe_load(path.read_text()), schema)
         assert load_script(path).steps
@@ -208,7 +209,7 @@ def test_scene_mismatch() -> None:
         ),
         (
             "  - move_to: {object: orange_cube, position: [0.4, 0, 0.2]}\n",
-            "step 0 (line 3): move_to: expected exactly one of the keys object, position, "
+            "step 0 (line 3): move_to: expected exactly one of the keys object, hand, position, "
             "found object, position",
         ),
         (
