@@ -41,7 +41,7 @@ from smccli.perception.room import d_room, room_histogram
 from smccli.perception.scan import Scan2D, align_scans, chamfer, map_goal
 from smccli.world.controller import reachable, wrap
 from smccli.world.robot import Robot
-from smccli.world.sensors import CameraFrame, RobotGeometry, hand_in_base
+from smccli.world.sensors import CameraFrame, RobotGeometry, hand_in_base, hand_in_world
 
 CONTROL_PERIOD = 0.01
 """Default control period of a plan's trajectory [s] (the simulator's)."""
@@ -513,7 +513,7 @@ class TreePolicy:
             base_now = np.array([obs.base[0], obs.base[1], 0.0, obs.base[2]])
         start = base_now if a.poi == "base" else obs.poi
         assert start is not None
-        goal = self.map_goal(a, cluster, start, edge.id, obs.lidar_pose)
+        goal = self.map_goal(a, cluster, start, edge.id, obs.lidar_pose, obs.base)
         duration = action_duration(a, start, goal)
         dec = replace(dec, mapped_goal=goal, duration=duration)
         base_goal = None
@@ -589,7 +589,9 @@ class TreePolicy:
         t0 = time.perf_counter()
         clusters: tuple[Cluster, ...] = ()
         if obs.camera is not None:
-            clusters = clusters_from_frame(obs.camera, obs.robot_geometry, self.params.perception)
+            clusters = clusters_from_frame(
+                obs.camera, obs.robot_geometry, self.params.perception, obs.base
+            )
         perceive_s = time.perf_counter() - t0
         t0 = time.perf_counter()
         d, idx = match_edges(stack, clusters, obs.weight, self.params)
@@ -713,10 +715,12 @@ class TreePolicy:
         start: np.ndarray,
         edge: str | None = None,
         lidar_pose: np.ndarray | None = None,
+        base: np.ndarray | None = None,
     ) -> np.ndarray:
         """Contingent action mapping of the goal (eq. 38-39, 46): ``start`` the POI now,
         ``cluster`` the context cluster the SMC matched; a scan-frame goal needs the
-        ``edge`` whose scan was aligned at the last decision and the ``lidar_pose`` now."""
+        ``edge`` whose scan was aligned at the last decision and the ``lidar_pose`` now;
+        a goal in a mobile manipulator's base frame needs the ``base`` pose [x, y, yaw]."""
         if action.goal_frame == "scan":
             # G_now = L_now * T^-1 * G_rel, T = the current lidar in the demo lidar's frame,
             # from the alignment that matched the scan (_match_base).
@@ -742,6 +746,10 @@ class TreePolicy:
             goal = goal_from_object(action.goal, cluster, near_yaw=float(start[3]), flip=flip)
         else:
             goal = np.array(action.goal, dtype=float)
+            if action.goal_frame == "base":  # a mobile manipulator's hand, relative to it
+                if base is None:
+                    raise SmcError(f"edge {edge}: a goal in the base's frame needs its pose")
+                goal = hand_in_world(base, goal)
             if flip:
                 goal[3] = start[3] + math.remainder(float(goal[3] - start[3]), math.pi)
         goal[3] = start[3] + wrap(float(goal[3] - start[3]))

@@ -76,7 +76,10 @@ class ReplayLog:
 
     def on_decision(self, dec: Decision, frame: CameraFrame, _start: np.ndarray) -> None:
         if self.sim.lidar_pose() is None:  # an arm's decision: the objects it saw
-            pts, cols, _ = object_points(frame, self.sim.robot_geometry(), self.params.perception)
+            base = self.sim.base_odometry() if self.sim.mobile_manipulator else None
+            pts, cols, _ = object_points(
+                frame, self.sim.robot_geometry(), self.params.perception, base
+            )
             self.writer.write_point_cloud(dec.t, pts, cols)
         else:  # a base's: the scan it matched
             self.writer.write_lidar(self.sim)

@@ -34,6 +34,7 @@ from smccli.logs.robot import geometry_at, robot_model_of
 from smccli.logs.ros2_bag import TopicMap, read_ros2_bag
 from smccli.outputs import ExclusiveLock, check_output
 from smccli.perception import Cluster, clusters_from_frame, salient_cluster, scale_reading
+from smccli.perception.params import scene_perception
 from smccli.perception.room import room_histogram
 from smccli.perception.scan import Scan2D, pose_compose
 from smccli.world.lidar import RANGE_MAX as LIDAR_RANGE_MAX
@@ -371,7 +372,9 @@ def _mobile_manipulator_smcs(
         frame = _frame_at(log.frames, frag.t0)
         if frame is None:
             raise LogError(f"{name}: no camera frame near t={frag.t0:.2f} s")
-        clusters = clusters_from_frame(frame, geometry_at(robot, log, frame.t), params.perception)
+        base_then = log.base[int(np.argmin(np.abs(log.base_t - frame.t)))]
+        geometry = geometry_at(robot, log, frame.t)
+        clusters = clusters_from_frame(frame, geometry, params.perception, base_then)
         ends = [hand_world[int(np.argmin(np.abs(log.poi_t - tt)))][:3] for tt in (frag.t1, frag.t0)]
         idx = salient_cluster(clusters, ends[0], params.epsilon)
         if idx is None:
@@ -382,6 +385,8 @@ def _mobile_manipulator_smcs(
             t, hand_in_world(base, hand), grip, cluster, params, held_symmetry=held
         )
         action = replace(action, poi="hand")
+        if cluster is None and not drives:  # nothing to go by: the hand relative to the robot
+            action = replace(action, goal_frame="base", goal=hand[-1].copy())
         if drives:
             from smccli.learn import dmp as dmp_mod
             from smccli.learn.smc import goal_in_object
@@ -399,7 +404,7 @@ def _mobile_manipulator_smcs(
             warnings.append(
                 f"{name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends and starts "
                 f"with no object within {params.epsilon} m of the hand; its goal is stored in "
-                "odometry's frame"
+                "the base's frame"
             )
         smcs.append(Smc(perception=SalientPerceptions(cluster=cluster, weight=None), action=action))
     return smcs
@@ -437,6 +442,14 @@ def _required_topics(log: Log, scene: Scene | None = None) -> set[str]:
     if log.metadata.get("has_scale") == "true":
         needed.add("/scale/weight")
     return needed
+
+
+def scene_params(scene: Scene, overrides: Sequence[str] = ()) -> SmcParams:
+    """The parameters a new tree of ``scene`` starts with: the defaults, the scene's
+    perception settings (scene.yaml ``perception``: a mobile manipulator's crop box in its
+    base's frame), then ``overrides`` (``--set``)."""
+    params = replace(SmcParams(), perception=scene_perception(scene))
+    return with_overrides(params, list(overrides))
 
 
 def _rebuild_base(out: Path) -> tuple[int, tuple[dict, ...]]:
@@ -487,7 +500,9 @@ def compile_logs(
     except TimeoutError:
         raise TreeError(f"{out}: locked by another compile ({out}.lock)") from None
     try:
-        if out.exists() and not rebuild:
+        fresh = not (out.exists() and not rebuild)
+        # A new tree takes its scene's perception settings (scene.yaml), then --set.
+        if not fresh:
             tree = load_tree(out)
             wanted = with_overrides(tree.params, list(overrides))
             if params_to_dict(wanted) != params_to_dict(tree.params):
@@ -540,6 +555,8 @@ def compile_logs(
                     f"{path}: scene {log.metadata.get('scene')!r} differs from the "
                     f"tree's scene {tree.scene.get('name')!r}"
                 )
+            if fresh and not added and scene.perception:
+                tree = replace(tree, params=scene_params(scene, overrides))
             if on_progress:
                 on_progress(path, "extracting")
             chain = extract_chain(log, tree.params, segment_mode, scene)

@@ -22,7 +22,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -285,7 +285,21 @@ def merge(
         symmetry=symmetry,
         approach=approach.reshape(-1, 3),
         held_symmetry=max(aa.held_symmetry, ab.held_symmetry),
+        poi=aa.poi,
     )
+    if aa.base_dmp is not None and ab.base_dmp is not None:
+        # A mobile manipulator's base path: merged as the hand's, its goal turned alike.
+        assert aa.base_goal is not None and ab.base_goal is not None
+        base_b = np.r_[rotate_z(ab.base_goal[:3], theta), ab.base_goal[3] + theta]
+        base_goal = (wa * aa.base_goal + wb * base_b) / (wa + wb)
+        base_goal[3] = wrap_angle(
+            aa.base_goal[3] + wb / (wa + wb) * wrap_angle(float(base_b[3] - aa.base_goal[3]))
+        )
+        action = replace(
+            action,
+            base_dmp=dmp_mod.merge([aa.base_dmp, ab.base_dmp], [wa, wb]),
+            base_goal=base_goal,
+        )
     perception = SalientPerceptions(
         cluster=cluster, weight=weight, room=room, scan=pa.scan, scan_pose=pa.scan_pose
     )

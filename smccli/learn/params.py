@@ -60,6 +60,8 @@ def params_to_dict(params: Any) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for f in dataclasses.fields(params):
         v = getattr(params, f.name)
+        if f.metadata.get("omit_default") and v == f.default:
+            continue  # added later: trees written before keep their digest
         if dataclasses.is_dataclass(v):
             out[f.name] = params_to_dict(v)
         elif isinstance(v, tuple):

@@ -34,10 +34,20 @@ def points_from_depth(frame: CameraFrame, max_depth: float = 5.0) -> tuple[np.nd
     return points, colors
 
 
-def crop_mask(points: np.ndarray, params: PerceptionParams) -> np.ndarray:
-    """Points inside the axis-aligned workspace box, boolean mask of shape (n,)."""
+def crop_mask(
+    points: np.ndarray, params: PerceptionParams, base: np.ndarray | None = None
+) -> np.ndarray:
+    """Points inside the axis-aligned workspace box, boolean mask of shape (n,). With
+    ``params.crop_frame == "base"`` the box is in the frame of the base at ``base``
+    ``[x, y, yaw]`` (odometry's frame, as the points)."""
     lo = np.asarray(params.crop_min)
     hi = np.asarray(params.crop_max)
+    if params.crop_frame == "base":
+        if base is None:
+            raise ValueError("perception.crop_frame=base needs the base's pose")
+        c, s = np.cos(base[2]), np.sin(base[2])
+        dx, dy = points[:, 0] - base[0], points[:, 1] - base[1]
+        points = np.column_stack([c * dx + s * dy, -s * dx + c * dy, points[:, 2]])
     return np.all((points >= lo) & (points <= hi), axis=1)
 
 
@@ -125,26 +135,96 @@ def voxel_downsample(
     return points[first], colors[first]
 
 
+def remove_planes(
+    points: np.ndarray, colors: np.ndarray, params: PerceptionParams
+) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Remove the big planes of any orientation (``params.remove_walls``): door panels,
+    cabinet sides, shelves and tops, one RANSAC plane at a time while one holds at least
+    ``wall_min_points`` points. Returns (points, colours, the near-horizontal planes, each
+    ``[a, b, c, d]`` with its normal up): a cluster stands on the one just below it, if
+    any (:func:`support_plane`)."""
+    horizontal: list[np.ndarray] = []
+    for _ in range(6):
+        if len(points) < params.wall_min_points:
+            break
+        stride = max(1, len(points) // params.plane_sample)
+        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[::stride]))
+        o3d.utility.random.seed(params.plane_seed)
+        plane, _ = pcd.segment_plane(
+            distance_threshold=params.plane_distance,
+            ransac_n=3,
+            num_iterations=params.plane_iterations,
+        )
+        plane = np.asarray(plane, dtype=np.float64)
+        plane /= np.linalg.norm(plane[:3])
+        on = np.abs(plane_distance(points, plane)) < params.plane_distance
+        if on.sum() < params.wall_min_points:
+            break
+        if plane[2] < 0:
+            plane = -plane
+        if np.arccos(np.clip(plane[2], -1.0, 1.0)) <= params.plane_max_tilt:
+            horizontal.append(plane)
+        points, colors = points[~on], colors[~on]
+    return points, colors, horizontal
+
+
+SUPPORT_GAP = 0.03
+"""A cluster stands on a horizontal plane whose surface is at most this far below its
+lowest point [m] (a can on a shelf, not a handle under a cabinet's top)."""
+
+
+def support_plane(points: np.ndarray, planes: list[np.ndarray]) -> np.ndarray | None:
+    """Of ``planes`` (near-horizontal, normals up), the one ``points`` (n, 3) stand on:
+    the highest whose surface lies at most SUPPORT_GAP below their lowest point; None."""
+    best: tuple[float, np.ndarray] | None = None
+    for plane in planes:
+        low = float(plane_distance(points, plane).min())
+        if -SUPPORT_GAP / 3 <= low <= SUPPORT_GAP and (best is None or low < best[0]):
+            best = (low, plane)
+    return None if best is None else best[1]
+
+
 def object_points(
-    frame: CameraFrame, robot: RobotGeometry | None, params: PerceptionParams
+    frame: CameraFrame,
+    robot: RobotGeometry | None,
+    params: PerceptionParams,
+    base: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """The points standing on the table: lift, crop, downsample, remove the table, self-filter.
 
     Returns (points (n, 3) [m], colours (n, 3) uint8, table plane ``[a, b, c, d]`` or None).
-    Without a table plane every cropped point is kept.
+    Without a table plane every cropped point is kept. ``base``: a mobile manipulator's
+    base pose ``[x, y, yaw]`` when the crop box is in its frame; with ``remove_walls``
+    every big plane goes and no single table is returned (:func:`object_points_on_planes`).
     """
+    points, colors, planes = object_points_on_planes(frame, robot, params, base)
+    return points, colors, None if params.remove_walls else (planes[0] if planes else None)
+
+
+def object_points_on_planes(
+    frame: CameraFrame,
+    robot: RobotGeometry | None,
+    params: PerceptionParams,
+    base: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """As :func:`object_points`, with every support plane found: the table's (at most
+    one), or with ``remove_walls`` each near-horizontal plane removed."""
     points, colors = points_from_depth(frame, params.max_depth)
-    keep = crop_mask(points, params)
+    keep = crop_mask(points, params, base)
     points, colors = points[keep], colors[keep]
     points, colors = voxel_downsample(points, colors, params.voxel_size)
-    plane = fit_table_plane(points, params)
-    if plane is not None:
-        keep = above_plane_mask(points, plane, params.plane_distance)
-        points, colors = points[keep], colors[keep]
+    if params.remove_walls:
+        points, colors, planes = remove_planes(points, colors, params)
+    else:
+        plane = fit_table_plane(points, params)
+        planes = [] if plane is None else [plane]
+        if plane is not None:
+            keep = above_plane_mask(points, plane, params.plane_distance)
+            points, colors = points[keep], colors[keep]
     # Self-filter last: the table is most of the cloud, so this tests far fewer points
     # against the robot's spheres; the robot's few points do not sway the RANSAC plane.
     keep = self_filter_mask(points, robot)
-    return points[keep], colors[keep], plane
+    return points[keep], colors[keep], planes
 
 
 def cloud_from_frame(
@@ -153,15 +233,17 @@ def cloud_from_frame(
     params: PerceptionParams | None = None,
     *,
     crop: bool = True,
+    base: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Coloured point cloud for visualisation: points (n, 3) [m] world frame, colours (n, 3) uint8.
 
-    With ``crop`` the workspace box and the self-filter are applied (the table is kept).
+    With ``crop`` the workspace box and the self-filter are applied (the table is kept);
+    ``base`` as in :func:`object_points`.
     """
     params = params or PerceptionParams()
     points, colors = points_from_depth(frame, params.max_depth)
     if crop:
-        keep = crop_mask(points, params)
+        keep = crop_mask(points, params, base)
         points, colors = points[keep], colors[keep]
         keep = self_filter_mask(points, robot)
         points, colors = points[keep], colors[keep]

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import open3d as o3d
 
-from smccli.perception.cloud import object_points, plane_distance
+from smccli.perception.cloud import object_points_on_planes, plane_distance, support_plane
 from smccli.perception.histogram import hsv_histogram
 from smccli.perception.params import PerceptionParams
 from smccli.world.sensors import CameraFrame, RobotGeometry
@@ -341,17 +341,21 @@ def cut_points(
 
 
 def clusters_from_frame(
-    frame: CameraFrame, robot: RobotGeometry | None, params: PerceptionParams | None = None
+    frame: CameraFrame,
+    robot: RobotGeometry | None,
+    params: PerceptionParams | None = None,
+    base: np.ndarray | None = None,
 ) -> tuple[Cluster, ...]:
     """The object clusters in one RGB-D frame (ML perception, eq. 14).
 
     depth -> world points -> crop -> self-filter (``robot``'s spheres) -> table plane
     removal (RANSAC) -> DBSCAN -> hidden parts joined to the cluster hiding them -> per
     cluster: histogram, box centre, yaw, symmetry, extents.
-    Sorted by centroid x, then y. Uses only the images and the robot's own geometry.
+    Sorted by centroid x, then y. Uses only the images and the robot's own geometry (and a
+    mobile manipulator's ``base`` pose from odometry, where its crop box is).
     """
     params = params or PerceptionParams()
-    points, colors, plane = object_points(frame, robot, params)
+    points, colors, planes = object_points_on_planes(frame, robot, params, base)
     labels = attach_hidden_parts(points, cluster_labels(points, params), frame, params)
     cut = cut_points(points, labels, frame, params)
     found = []
@@ -359,6 +363,11 @@ def clusters_from_frame(
         idx = np.flatnonzero(labels == k)
         if len(idx) < params.min_cluster_points:
             continue
+        # A tabletop has one table; among shelves and cabinet tops, the one just below.
+        if params.remove_walls:
+            plane = support_plane(points[idx], planes)
+        else:
+            plane = planes[0] if planes else None
         found.append(describe_cluster(points[idx], colors[idx], plane, params, cut[idx]))
     found.sort(key=lambda c: (float(c.centroid[0]), float(c.centroid[1])))
     return tuple(found)

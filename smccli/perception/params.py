@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from smccli.world.scene import Scene
 
 
 @dataclass(frozen=True, slots=True)
@@ -19,6 +23,15 @@ class PerceptionParams:
     """Lower corner of the workspace box, world frame [m]."""
     crop_max: tuple[float, float, float] = (1.0, 0.65, 0.6)
     """Upper corner of the workspace box, world frame [m]."""
+    crop_frame: str = field(default="world", metadata={"omit_default": True})
+    """Frame of the crop box: ``world``, or ``base`` for a mobile manipulator (the box moves
+    with the robot: in front of it, at the height its hand works)."""
+    remove_walls: bool = field(default=False, metadata={"omit_default": True})
+    """Also remove the big planes of any orientation (door panels, cabinet sides) before
+    clustering, so that a handle standing off a door is a cluster of its own (a mobile
+    manipulator's scenes; a tabletop has only the table's plane)."""
+    wall_min_points: int = field(default=400, metadata={"omit_default": True})
+    """A plane with fewer inliers than this is not removed as a wall (a box's face)."""
     max_depth: float = 5.0
     """Depth readings beyond this are "nothing hit" (renderers return the far plane) [m]."""
     voxel_size: float = 0.0
@@ -99,3 +112,10 @@ class PerceptionParams:
     """A hidden part has at most this many times the points of the cluster hiding it: a
     mug's cut-off handle has at most 0.23 times its body's (measured over 300 poses), while
     a cylinder under a held cube, bigger than the cube, stays an object of its own."""
+
+
+def scene_perception(scene: Scene) -> PerceptionParams:
+    """The perception settings a scene's trees start with: the defaults with the scene
+    file's ``perception`` section (a mobile manipulator's crop box in its base's frame)."""
+    settings: dict[str, Any] = dict(scene.perception)
+    return replace(PerceptionParams(), **settings)

@@ -217,7 +217,7 @@ def _session(
         if t >= next_cam - 1e-9:
             frame = sim.render_camera() if t > 0 else frame
             writer.write_camera(frame)
-            writer.write_lidar(sim)  # the lidar runs on the camera's 10 Hz clock
+            writer.write_lidar(sim)  # the lidar runs on the camera's clock
             next_cam += cam_period
         if t >= next_gt - 1e-9:
             writer.write_ground_truth(t, sim.ground_truth())
@@ -226,6 +226,11 @@ def _session(
         for mark in step.marks:
             writer.write_saliency(mark)
             marks += 1
+        if step.marks and sim.scene.camera.at_marks and frame.t < sim.t - 1e-9:
+            # A slow camera also looks at each decision point, where compile perceives.
+            frame = sim.render_camera()
+            writer.write_camera(frame)
+            writer.write_lidar(sim)
         if step.marks:  # the scene at each salient moment, for inspection
             _log_cloud(writer, sim, frame)
         if step.done:
@@ -291,9 +296,12 @@ def _log_state(writer: LogWriter, sim: Sim) -> None:
 
 def _log_cloud(writer: LogWriter, sim: Sim, frame) -> None:
     """World-frame point cloud of the workspace (robot removed) on ``/perception/points``."""
-    from smccli.perception import PerceptionParams, cloud_from_frame
+    from smccli.perception import cloud_from_frame
+    from smccli.perception.params import scene_perception
 
-    points, colors = cloud_from_frame(frame, sim.robot_geometry(), PerceptionParams())
+    base = sim.base_odometry() if sim.mobile_manipulator else None
+    params = scene_perception(sim.scene)
+    points, colors = cloud_from_frame(frame, sim.robot_geometry(), params, base=base)
     writer.write_point_cloud(sim.t, points[::2].astype("float32"), colors[::2])
 
 

@@ -138,6 +138,8 @@ class CameraSpec:
     """Image height [px]."""
     rate: float
     """Frame rate [Hz]."""
+    at_marks: bool = False
+    """Also a frame (and a lidar scan) at each saliency mark while recording."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -178,6 +180,9 @@ class Scene:
     regions: tuple[tuple[str, tuple[tuple[float, float, float, float], ...]], ...] = ()
     """Named areas of the floor (rooms), each a union of rectangles ``(x_min, x_max, y_min,
     y_max)`` [m]; used to say in which room a base ended (evaluation, inspect)."""
+    perception: tuple[tuple[str, object], ...] = ()
+    """Perception settings the scene's trees start with (scene.yaml ``perception``), as
+    (name, value) pairs of :class:`~smccli.perception.params.PerceptionParams` fields."""
 
     def place(self, name: str) -> tuple[float, float, float]:
         """The place called ``name``; SceneError listing the valid names otherwise."""
@@ -529,6 +534,7 @@ def _parse(
         width=int(cam.get("width", 320)),
         height=int(cam.get("height", 240)),
         rate=float(cam.get("rate", 10.0)),
+        at_marks=bool(cam.get("at_marks", False)),
     )
     scale = sensors.get("scale")
     if scale is not None:
@@ -698,6 +704,10 @@ def _scene(
         start=_start(raw, where, yaml_text, robot),
         places=_places(raw),
         regions=_regions(raw, where, yaml_text),
+        perception=tuple(
+            (k, tuple(v) if isinstance(v, list) else v)
+            for k, v in sorted((raw.get("perception") or {}).items())
+        ),
     )
 
 
