@@ -34,7 +34,7 @@ from smccli.learn.contingency import d_p as d_p_stored
 from smccli.learn.contingency import goal_gap
 from smccli.learn.dmp import rollout
 from smccli.learn.params import SmcParams
-from smccli.learn.smc import TWO_PI, Action, goal_from_object
+from smccli.learn.smc import TWO_PI, Action, goal_from_object, pose_from_pose
 from smccli.learn.tree import ROOT, Edge, Tree
 from smccli.perception import Cluster, clusters_from_frame
 from smccli.perception.room import d_room, room_histogram
@@ -518,7 +518,7 @@ class TreePolicy:
         dec = replace(dec, mapped_goal=goal, duration=duration)
         base_goal = None
         if a.base_dmp is not None and a.base_goal is not None and base_now is not None:
-            base_goal = self._map_base_goal(a, cluster, base_now)
+            base_goal = self._map_base_goal(a, cluster, base_now, obs.poi)
         # A mobile manipulator's hand goal is reached from where its base will stand.
         hand_goal = goal
         if base_now is not None and a.poi == "hand":
@@ -560,8 +560,10 @@ class TreePolicy:
             goal=goal,
             times=times,
             poses=poses,
-            gripper_start=1.0 if a.gripper_start >= 0.5 else 0.0,
-            gripper_end=1.0 if a.gripper_end >= 0.5 else 0.0,
+            # Closed means squeeze; open as demonstrated (fingers opened only part way past a
+            # door's edge onto its handle).
+            gripper_start=float(a.gripper_start) if a.gripper_start >= 0.5 else 0.0,
+            gripper_end=float(a.gripper_end) if a.gripper_end >= 0.5 else 0.0,
             switch_index=switch,
             gripper_switch=None if switch is None else float(times[switch]),
             event=a.event,
@@ -693,14 +695,27 @@ class TreePolicy:
                 f"match on {what} (Observation.{name})"
             )
 
+    @staticmethod
+    def _hand_frame(a: Action, hand: np.ndarray, base: np.ndarray | None) -> np.ndarray:
+        """The frame of a goal relative to the hand ``[x, y, z, yaw]``: the hand's pose, its
+        yaw (ambiguous by the gripper's pi) taken nearest the base's plus ``a.hand_yaw``."""
+        frame = np.array(hand, dtype=float)
+        if a.hand_yaw is not None and base is not None:
+            ref = float(base[2]) + a.hand_yaw
+            frame[3] = ref + math.remainder(float(hand[3]) - ref, math.pi)
+        return frame
+
     def _map_base_goal(
-        self, a: Action, cluster: Cluster | None, base_now: np.ndarray
+        self, a: Action, cluster: Cluster | None, base_now: np.ndarray, hand_now: np.ndarray
     ) -> np.ndarray:
         """Where a mobile manipulator's base goes while its hand acts (``a.base_goal``): in
         the salient object's frame, the object's yaw taken nearest the base's heading (a
         base does not turn round with an elongated handle's symmetry); else as taught."""
         assert a.base_goal is not None
-        if a.goal_frame == "object" and cluster is not None:
+        if a.goal_frame == "hand":
+            g = pose_from_pose(self._hand_frame(a, hand_now, base_now[[0, 1, 3]]), a.base_goal)
+            g[2] = 0.0
+        elif a.goal_frame == "object" and cluster is not None:
             g = goal_from_object(a.base_goal, cluster, near_yaw=float(base_now[3]), flip=False)
             g[2] = 0.0
         else:
@@ -732,6 +747,11 @@ class TreePolicy:
             T = self._scan_alignment[edge]
             x, y, yaw = map_goal(action.goal[[0, 1, 3]], T, lidar_pose)
             return np.array([x, y, 0.0, start[3] + wrap(float(yaw - start[3]))])
+        if action.goal_frame == "hand":  # relative to the hand's pose now (it holds a handle)
+            frame = self._hand_frame(action, start, base)
+            goal = pose_from_pose(frame, action.goal)
+            goal[3] = start[3] + float(action.goal[3])  # the wrist turns as it did
+            return goal
         if self.robot.gripper is None or action.poi == "base":  # a base's world goal
             goal = np.array(action.goal, dtype=float)
             goal[3] = start[3] + wrap(float(goal[3] - start[3]))

@@ -39,9 +39,12 @@ def describe_action(smc: Smc) -> str:
     """One-line summary of an SMC's action."""
     a = smc.action
     g = a.goal
-    where = {"object": "rel. object", "scan": "rel. scan", "base": "rel. base"}.get(
-        a.goal_frame, "world"
-    )
+    where = {
+        "object": "rel. object",
+        "scan": "rel. scan",
+        "base": "rel. base",
+        "hand": "rel. hand",
+    }.get(a.goal_frame, "world")
     return (
         f"{a.event} | goal ({g[0]:+.3f}, {g[1]:+.3f}, {g[2]:+.3f}) m {where}, "
         f"{a.dmp.duration:.1f} s"

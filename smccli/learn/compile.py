@@ -18,6 +18,7 @@ import numpy as np
 
 from smccli import __version__
 from smccli.errors import LogError, TreeError
+from smccli.learn import dmp as dmp_mod
 from smccli.learn.params import SmcParams, params_to_dict, with_overrides
 from smccli.learn.segmentation import Fragment, SegmentMode, segment, trace_from_commands
 from smccli.learn.smc import (
@@ -27,6 +28,8 @@ from smccli.learn.smc import (
     Source,
     action_from_path,
     action_in_scan_frame,
+    goal_in_object,
+    pose_in_pose,
 )
 from smccli.learn.tree import FORMAT, Tree, insert_chain, load_tree, save_tree
 from smccli.logs import Log, read_log
@@ -320,8 +323,10 @@ def _mobile_manipulator_smcs(
     - both (pulling a door while backing up): as manipulation, plus the base's path as a
       second DMP of the same duration, its goal in the same object's frame.
 
-    The salient object of a manipulation is the cluster nearest the hand where the action
-    ends, else where it starts (what it pulls or carries), within epsilon.
+    A manipulation that starts with the hand closed on something (pulling a handle,
+    carrying the object) moves relative to the hand: its goal is in the frame of the hand's
+    start pose and it has no salient object (the hand hides what it holds). Otherwise the
+    salient object is the cluster nearest the hand where the action ends, within epsilon.
     """
     name = log.path.name
     if not len(log.base_t):
@@ -366,33 +371,47 @@ def _mobile_manipulator_smcs(
                     params,
                     warnings,
                     poi="base",
+                    grip=float(cmds[-1].gripper),
                 )
             )
             continue
-        frame = _frame_at(log.frames, frag.t0)
-        if frame is None:
-            raise LogError(f"{name}: no camera frame near t={frag.t0:.2f} s")
-        base_then = log.base[int(np.argmin(np.abs(log.base_t - frame.t)))]
-        geometry = geometry_at(robot, log, frame.t)
-        clusters = clusters_from_frame(frame, geometry, params.perception, base_then)
-        ends = [hand_world[int(np.argmin(np.abs(log.poi_t - tt)))][:3] for tt in (frag.t1, frag.t0)]
-        idx = salient_cluster(clusters, ends[0], params.epsilon)
-        if idx is None:
-            idx = salient_cluster(clusters, ends[1], params.epsilon)
-        cluster = None if idx is None else clusters[idx]
         grip = np.array([c.gripper for c in cmds])
-        action = action_from_path(
-            t, hand_in_world(base, hand), grip, cluster, params, held_symmetry=held
-        )
+        world = hand_in_world(base, hand)
+        holding = bool(grip[0] < 0.5)
+        cluster = None
+        if not holding:  # reaching for something: the object the hand ends at (ML)
+            frame = _frame_at(log.frames, frag.t0)
+            if frame is None:
+                raise LogError(f"{name}: no camera frame near t={frag.t0:.2f} s")
+            base_then = log.base[int(np.argmin(np.abs(log.base_t - frame.t)))]
+            geometry = geometry_at(robot, log, frame.t)
+            clusters = clusters_from_frame(frame, geometry, params.perception, base_then)
+            end = hand_world[int(np.argmin(np.abs(log.poi_t - frag.t1)))][:3]
+            idx = salient_cluster(clusters, end, params.epsilon)
+            cluster = None if idx is None else clusters[idx]
+        action = action_from_path(t, world, grip, cluster, params, held_symmetry=held)
         action = replace(action, poi="hand")
-        if cluster is None and not drives:  # nothing to go by: the hand relative to the robot
+        if holding:
+            # The hand holds what it moves (a handle, the object): where it goes follows from
+            # where it holds it, whatever the hand hides of it. Goal, and the base's, in the
+            # frame of the hand's start pose.
+            action = replace(
+                action,
+                goal_frame="hand",
+                goal=pose_in_pose(world[0], world[-1]),
+                hand_yaw=float(world[0][3] - base[0][2]),
+            )
+        elif cluster is None:  # nothing to go by: the hand relative to the robot
             action = replace(action, goal_frame="base", goal=hand[-1].copy())
         if drives:
-            from smccli.learn import dmp as dmp_mod
-            from smccli.learn.smc import goal_in_object
-
             end = base_path[-1].copy()
-            base_goal = end if cluster is None else goal_in_object(end, cluster)
+            base_goal = (
+                pose_in_pose(world[0], end)
+                if holding
+                else end
+                if cluster is None
+                else goal_in_object(end, cluster)
+            )
             action = replace(
                 action, base_dmp=dmp_mod.fit(t, base_path, params.dmp), base_goal=base_goal
             )
@@ -400,11 +419,10 @@ def _mobile_manipulator_smcs(
             held = cluster.yaw_period if cluster is not None else 0.0
         elif action.event == "open":
             held = 0.0
-        if cluster is None:
+        if cluster is None and not holding:
             warnings.append(
-                f"{name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends and starts "
-                f"with no object within {params.epsilon} m of the hand; its goal is stored in "
-                "the base's frame"
+                f"{name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends with no object "
+                f"within {params.epsilon} m of the hand; its goal is stored in the base's frame"
             )
         smcs.append(Smc(perception=SalientPerceptions(cluster=cluster, weight=None), action=action))
     return smcs

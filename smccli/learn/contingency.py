@@ -286,6 +286,7 @@ def merge(
         approach=approach.reshape(-1, 3),
         held_symmetry=max(aa.held_symmetry, ab.held_symmetry),
         poi=aa.poi,
+        hand_yaw=aa.hand_yaw,
     )
     if aa.base_dmp is not None and ab.base_dmp is not None:
         # A mobile manipulator's base path: merged as the hand's, its goal turned alike.

@@ -98,6 +98,10 @@ class Action:
     and base both moved (pulling a door while backing up): two DMPs, one duration."""
     base_goal: np.ndarray | None = None
     """That path's goal ``[dx, dy, 0, dyaw]`` in ``goal``'s frame [m, rad], shape (4,)."""
+    hand_yaw: float | None = None
+    """With ``goal_frame == "hand"``: the hand's yaw relative to the base's when the action
+    started [rad]. The frame's yaw is the hand's, which the gripper's half-turn symmetry
+    leaves ambiguous by pi: replay takes the one nearest the base's yaw plus this."""
 
     @property
     def event(self) -> str:
@@ -275,6 +279,27 @@ def action_in_scan_frame(
     )
 
 
+def pose_in_pose(frame: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """``pose`` ``[x, y, z, yaw]`` in the yawed frame of ``frame`` ``[x, y, z, yaw]``:
+    ``[dx, dy, dz, dyaw]`` (a mobile manipulator's goal relative to the hand's start)."""
+    c, s = math.cos(frame[3]), math.sin(frame[3])
+    dx, dy = pose[0] - frame[0], pose[1] - frame[1]
+    return np.array([c * dx + s * dy, -s * dx + c * dy, pose[2] - frame[2], pose[3] - frame[3]])
+
+
+def pose_from_pose(frame: np.ndarray, rel: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`pose_in_pose`: ``rel`` in ``frame``'s yawed frame -> the world."""
+    c, s = math.cos(frame[3]), math.sin(frame[3])
+    return np.array(
+        [
+            frame[0] + c * rel[0] - s * rel[1],
+            frame[1] + s * rel[0] + c * rel[1],
+            frame[2] + rel[2],
+            frame[3] + rel[3],
+        ]
+    )
+
+
 def goal_from_object(
     goal_obj: np.ndarray, cluster: Cluster, near_yaw: float, *, flip: bool = True
 ) -> np.ndarray:
@@ -383,6 +408,8 @@ def smc_to_dict(smc: Smc) -> tuple[dict[str, Any], dict[str, Any]]:
     if a.base_dmp is not None and a.base_goal is not None:
         action["base_dmp"] = dmp_mod.to_dict(a.base_dmp)
         action["base_goal"] = _to_json(a.base_goal)
+    if a.hand_yaw is not None:
+        action["hand_yaw"] = a.hand_yaw
     return perception, action
 
 
@@ -413,5 +440,6 @@ def smc_from_dict(perception: dict[str, Any], action: dict[str, Any]) -> Smc:
             base_goal=(
                 None if "base_goal" not in action else np.asarray(action["base_goal"], float)
             ),
+            hand_yaw=None if action.get("hand_yaw") is None else float(action["hand_yaw"]),
         ),
     )

@@ -469,9 +469,16 @@ class Sim:
 
     def robot_contacts(self) -> list[str]:
         """Names of what the robot's collision geoms touch now, floor excluded (evaluation
-        only: a mobile base's collisions)."""
+        only: a mobile base's collisions; a mobile manipulator's hand is left out)."""
         m, d = self.model, self.data
         mine = set(self._robot_geoms)
+        if self.mobile_manipulator:
+            # Its hand is meant to touch: the fingers and the body they ride on (the palm)
+            # grasp handles and objects; the base and the arm's links must touch nothing.
+            fingers = self.robot.gripper.joints if self.robot.gripper else ()
+            hand = {int(m.jnt_bodyid[m.joint(j).id]) for j in fingers}
+            hand |= {int(m.body_parentid[b]) for b in hand}
+            mine = {g for g in mine if int(m.geom_bodyid[g]) not in hand}
         out = []
         for i in range(d.ncon):
             c = d.contact[i]
