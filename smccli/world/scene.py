@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -74,6 +74,8 @@ class ObjectSpec:
     """Randomisation range of yaw [rad]."""
     fixed: bool = False
     """Welded to the world (no free joint): scales, and anything the user wants static."""
+    on: str | None = None
+    """The furniture it rests on (its pose and ranges at the furniture's nominal pose)."""
     wall: float = 0.01
     """Wall and floor thickness of an ``open_box`` [m]."""
 
@@ -124,6 +126,22 @@ class SuccessCriterion:
     variant: str | None = None
     """The criterion only counts in layouts of this variant (the arrow the robot was
     shown); None: in every layout."""
+
+
+@dataclass(frozen=True, slots=True)
+class FurnitureSpec:
+    """A body of the scene's MJCF that a layout moves as a whole (a wardrobe and its door)."""
+
+    name: str
+    """Body name in the MJCF."""
+    pose: tuple[float, float, float, float]
+    """Nominal pose ``(x, y, z, yaw)`` [m, m, m, rad] (the MJCF's)."""
+    range_x: tuple[float, float]
+    """Randomisation range of x [m]; equal bounds mean fixed."""
+    range_y: tuple[float, float]
+    """Randomisation range of y [m]."""
+    range_yaw: tuple[float, float]
+    """Randomisation range of yaw [rad]."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -180,6 +198,8 @@ class Scene:
     regions: tuple[tuple[str, tuple[tuple[float, float, float, float], ...]], ...] = ()
     """Named areas of the floor (rooms), each a union of rectangles ``(x_min, x_max, y_min,
     y_max)`` [m]; used to say in which room a base ended (evaluation, inspect)."""
+    furniture: tuple[FurnitureSpec, ...] = ()
+    """Bodies of the MJCF a layout moves as a whole; objects ``on`` them move along."""
     perception: tuple[tuple[str, object], ...] = ()
     """Perception settings the scene's trees start with (scene.yaml ``perception``), as
     (name, value) pairs of :class:`~smccli.perception.params.PerceptionParams` fields."""
@@ -370,6 +390,8 @@ def nominal_layout(scene: Scene, variant: str | None = None) -> Layout:
     """The objects of ``variant`` (default: all) at their nominal poses."""
     present = scene.variant_objects(variant)
     layout: Layout = {o.name: tuple(o.pose) for o in scene.objects if o.name in present}  # type: ignore[misc]
+    for f in scene.furniture:
+        layout[f.name] = f.pose
     if scene.start is not None:
         x, y, yaw = scene.start.pose
         layout[ROBOT_KEY] = (x, y, 0.0, yaw)
@@ -391,13 +413,17 @@ def sample_layout(
     present = scene.variant_objects(variant)
     for _ in range(max_tries):
         layout: Layout = {}
+        moved: dict[str, tuple[float, float, float, float]] = {}
+        for f in scene.furniture:
+            fx, fy, fyaw = _draw(rng, f.range_x, f.range_y, f.range_yaw)
+            layout[f.name] = (fx, fy, f.pose[2], fyaw)
+            moved[f.name] = f.pose
         for o in scene.objects:
             if o.name not in present:
                 continue
-            x = float(rng.uniform(*o.range_x)) if o.range_x[0] < o.range_x[1] else o.range_x[0]
-            y = float(rng.uniform(*o.range_y)) if o.range_y[0] < o.range_y[1] else o.range_y[0]
-            lo, hi = o.range_yaw
-            yaw = float(rng.uniform(lo, hi)) if lo < hi else lo
+            x, y, yaw = _draw(rng, o.range_x, o.range_y, o.range_yaw)
+            if o.on is not None:  # drawn at the furniture's nominal pose, moved with it
+                x, y, yaw = _carry(moved[o.on], layout[o.on], (x, y, yaw))
             layout[o.name] = (x, y, o.pose[2], yaw)
         if scene.start is not None:
             st = scene.start
@@ -411,6 +437,29 @@ def sample_layout(
     raise SceneError(
         f"scene {scene.name}: no overlap-free layout in {max_tries} draws (ranges too tight)"
     )
+
+
+def _draw(
+    rng: np.random.Generator,
+    rx: tuple[float, float],
+    ry: tuple[float, float],
+    ryaw: tuple[float, float],
+) -> tuple[float, float, float]:
+    """x, y, yaw drawn uniformly from their ranges (equal bounds: that value)."""
+    return tuple(  # type: ignore[return-value]
+        float(rng.uniform(lo, hi)) if lo < hi else lo for lo, hi in (rx, ry, ryaw)
+    )
+
+
+def _carry(
+    nominal: Sequence[float], actual: Sequence[float], pose: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    """A pose ``(x, y, yaw)`` given with furniture at ``nominal`` (x, y, z, yaw), moved
+    with it to ``actual``."""
+    dyaw = actual[3] - nominal[3]
+    c, s = math.cos(dyaw), math.sin(dyaw)
+    dx, dy = pose[0] - nominal[0], pose[1] - nominal[1]
+    return (actual[0] + c * dx - s * dy, actual[1] + s * dx + c * dy, pose[2] + dyaw)
 
 
 def load_layout_file(path: str | Path, scene: Scene) -> Layout:
@@ -524,6 +573,7 @@ def _parse(
                 range_yaw=ranges["yaw"],
                 fixed=bool(o.get("fixed", shape == "scale")),
                 wall=float(o.get("wall", 0.01)),
+                on=None if o.get("rests_on") is None else str(o["rests_on"]),
             )
         )
     names = [o.name for o in objects]
@@ -708,7 +758,36 @@ def _scene(
             (k, tuple(v) if isinstance(v, list) else v)
             for k, v in sorted((raw.get("perception") or {}).items())
         ),
+        furniture=_furniture(raw, objects, model, where, yaml_text),
     )
+
+
+def _furniture(
+    raw: Mapping[str, Any],
+    objects: Sequence[ObjectSpec],
+    model: mujoco.MjModel,
+    where: str,
+    yaml_text: str,
+) -> tuple[FurnitureSpec, ...]:
+    """The scene file's ``furniture``: MJCF bodies a layout moves; objects ``on`` them."""
+    out = []
+    for i, f in enumerate(raw.get("furniture") or ()):
+        name = str(f["name"])
+        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name) < 0:
+            raise SceneError(
+                f"{_at(yaml_text, where, ('furniture', i, 'name'))}: the MJCF has no body {name!r}"
+            )
+        x, y, z, yaw = _vec(f["pose"])
+        ranges = _ranges(f.get("range"), (x, y, yaw), ("furniture", i), where, yaml_text)
+        out.append(FurnitureSpec(name, (x, y, z, yaw), ranges["x"], ranges["y"], ranges["yaw"]))
+    names = {f.name for f in out}
+    for i, o in enumerate(objects):
+        if o.on is not None and o.on not in names:
+            raise SceneError(
+                f"{_at(yaml_text, where, ('objects', i, 'rests_on'))}: no furniture {o.on!r} "
+                f"(furniture: {', '.join(sorted(names)) or 'none'})"
+            )
+    return tuple(out)
 
 
 def _replace_path(scene: Scene, path: Path) -> Scene:

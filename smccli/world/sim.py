@@ -143,6 +143,8 @@ class Sim:
                 self._lidar_site = self._id(mujoco.mjtObj.mjOBJ_SITE, s.target)
         self._cam_id = self._id(mujoco.mjtObj.mjOBJ_CAMERA, scene.camera.name)
         self._body = {o.name: self._id(mujoco.mjtObj.mjOBJ_BODY, o.name) for o in scene.objects}
+        for f in scene.furniture:  # moved by the layout as fixed objects are
+            self._body[f.name] = self._id(mujoco.mjtObj.mjOBJ_BODY, f.name)
         self._free_qadr = {}
         for o in scene.objects:
             if not o.fixed:
