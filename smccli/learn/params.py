@@ -55,15 +55,17 @@ class SmcParams:
     """Scan alignment and distance settings (4.2)."""
 
 
-def params_to_dict(params: Any) -> dict[str, Any]:
-    """Nested plain-JSON dict of a params dataclass (tuples become lists)."""
+def params_to_dict(params: Any, *, full: bool = False) -> dict[str, Any]:
+    """Nested plain-JSON dict of a params dataclass (tuples become lists). Settings added
+    later are left out at their default (trees written before keep their digest) unless
+    ``full``."""
     out: dict[str, Any] = {}
     for f in dataclasses.fields(params):
         v = getattr(params, f.name)
-        if f.metadata.get("omit_default") and v == f.default:
-            continue  # added later: trees written before keep their digest
+        if f.metadata.get("omit_default") and v == f.default and not full:
+            continue
         if dataclasses.is_dataclass(v):
-            out[f.name] = params_to_dict(v)
+            out[f.name] = params_to_dict(v, full=full)
         elif isinstance(v, tuple):
             out[f.name] = [list(x) if isinstance(x, tuple) else x for x in v]
         else:
@@ -92,7 +94,7 @@ def params_from_dict(cls: type, data: dict[str, Any]) -> Any:
 
 def with_overrides(params: SmcParams, assignments: list[str]) -> SmcParams:
     """Apply ``KEY=VALUE`` overrides (dotted keys into nested settings)."""
-    data = params_to_dict(params)
+    data = params_to_dict(params, full=True)
     for item in assignments:
         key, sep, raw = item.partition("=")
         if not sep or not key:

@@ -168,9 +168,11 @@ def remove_planes(
     return points, colors, horizontal
 
 
-SUPPORT_GAP = 0.03
+SUPPORT_GAP = 0.05
 """A cluster stands on a horizontal plane whose surface is at most this far below its
-lowest point [m] (a can on a shelf, not a handle under a cabinet's top)."""
+lowest point [m] (a can on a shelf, not a handle under a cabinet's top). Its sides may be
+out of sight (a lying screwdriver seen from above showed only its top face, 3.7 cm over
+the shelf)."""
 
 
 def support_plane(points: np.ndarray, planes: list[np.ndarray]) -> np.ndarray | None:
