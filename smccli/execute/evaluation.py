@@ -76,7 +76,7 @@ def score(
         if collisions:
             ok, outcome = False, "collision"
             reason = f"the base touched {', '.join(sorted(set(collisions)))}; {reason}"
-        elif not ok and scene.robot.base is not None:
+        elif not ok and scene.robot.base is not None and not scene.robot.arm_joints:
             outcome = classify_base_failure(scene, sim, final[ROBOT_KEY])
         elif not ok:
             outcome = classify_failure(scene, layout, final, actions, obj)
