@@ -211,3 +211,21 @@ def test_the_wardrobe_moves_between_two_decisions(tree, scene):
     assert moved
     assert sim.success(), sim.success().reason
     sim.close()
+
+
+def test_inspect_shows_the_whole_trace(tree, tmp_path):
+    """Base path, the hand's path in the world, scans, clusters at the decision points."""
+    from test_inspect import _instances, read_rrd
+
+    from smccli.inspect.recording import inspect
+
+    demo = SAMPLES / "demo_can.mcap"
+    inspect(tree, [demo], save=tmp_path / "loco.rrd")
+    rec = next(iter(read_rrd(tmp_path / "loco.rrd").values()))
+    path = np.asarray(_instances(rec["/world/poi/path"], "LineStrips3D:strips")[0])
+    assert np.ptp(path[:, 0]) > 3.0, "the hand's path in the world crosses both rooms"
+    assert 0.5 < np.median(path[:, 2]) < 1.2
+    assert "Arrows3D" in rec["/world/base/heading"]["archetypes"]
+    assert rec["/world/lidar/scan"]["rows"] > 0
+    assert rec["/world/decisions/clusters"]["rows"] > 0
+    assert any(p.startswith("/world/robot/") for p in rec)

@@ -623,13 +623,14 @@ def _scene_geometry(scene: Any) -> MobileView:
     lidar = next((m for m in robot.sensors if m.type == "lidar"), None)
     mount, lidar_z = np.zeros(3), 0.0
     if lidar is not None:
-        mount = lidar_mount(model, robot.poi, lidar.target)
+        # A mobile manipulator's base pose is its own POI (the hand is the other one).
+        mount = lidar_mount(model, None if robot.arm_joints else robot.poi, lidar.target)
         sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, lidar.target)
         lidar_z = float(data.site_xpos[sid][2])
     footprint = None
     pid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, robot.poi)
     own = np.flatnonzero(model.geom_group == robot.geom_group)
-    if pid >= 0 and len(own):
+    if pid >= 0 and len(own) and not robot.arm_joints:
         R = data.site_xmat[pid].reshape(3, 3)
         yaw = math.atan2(R[1, 0], R[0, 0])
         signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)])
@@ -790,23 +791,45 @@ def _lidar_poses(log: Any, times: np.ndarray, mobile: MobileView) -> np.ndarray:
     interpolated there, composed with the lidar's mounting; shape (N, 3)."""
     from smccli.perception.scan import pose_compose
 
-    poi = np.column_stack([np.interp(times, log.poi_t, log.poi[:, i]) for i in (0, 1, 3)])
+    bt, base = base_track(log)
+    poi = np.column_stack([np.interp(times, bt, base[:, i]) for i in (0, 1, 3)])
     return np.array([pose_compose(p, mobile.mount) for p in poi]).reshape(-1, 3)
+
+
+def base_track(log: Any) -> tuple[np.ndarray, np.ndarray]:
+    """A mobile robot's base over time: (times (T,) [s], poses (T, 4) ``[x, y, 0, yaw]``);
+    a mobile manipulator's from ``/robot/base`` (its POI is the hand), else the POI."""
+    if len(log.base_t):
+        b = log.base
+        return log.base_t, np.column_stack([b[:, 0], b[:, 1], np.zeros(len(b)), b[:, 2]])
+    return log.poi_t, log.poi
+
+
+def hand_track(log: Any) -> np.ndarray:
+    """The POI in the world over time, shape (T, 4): a mobile manipulator's hand (logged in
+    its base's frame) composed with its base's pose, else the POI as logged."""
+    if not len(log.base_t):
+        return np.asarray(log.poi)
+    from smccli.world.sensors import hand_in_world
+
+    idx = np.clip(np.searchsorted(log.base_t, log.poi_t), 0, len(log.base_t) - 1)
+    return hand_in_world(log.base[idx], log.poi)
 
 
 def _log_base(rec: Any, log: Any, mobile: MobileView) -> None:
     """The base's footprint and heading over time (from the POI, i.e. odometry)."""
     import rerun as rr
 
-    n = len(log.poi_t)
-    yaw = log.poi[:, 3]
-    times = [rr.TimeColumn(TIMELINE, duration=log.poi_t)]
+    bt, base = base_track(log)
+    n = len(bt)
+    yaw = base[:, 3]
+    times = [rr.TimeColumn(TIMELINE, duration=bt)]
     if mobile.footprint is not None:
         x0, x1, y0, y1 = mobile.footprint
         cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
         c, s = np.cos(yaw), np.sin(yaw)
         centres = np.column_stack(
-            [log.poi[:, 0] + c * cx - s * cy, log.poi[:, 1] + s * cx + c * cy, np.full(n, 0.03)]
+            [base[:, 0] + c * cx - s * cy, base[:, 1] + s * cx + c * cy, np.full(n, 0.03)]
         )
         quats = np.column_stack([np.zeros(n), np.zeros(n), np.sin(yaw / 2), np.cos(yaw / 2)])
         rec.send_columns(
@@ -820,7 +843,7 @@ def _log_base(rec: Any, log: Any, mobile: MobileView) -> None:
                 radii=np.full(n, 0.008),
             ),
         )
-    arrows = _pose_arrows(log.poi[:, [0, 1, 3]], 0.07)
+    arrows = _pose_arrows(base[:, [0, 1, 3]], 0.07)
     rec.send_columns(
         "/world/base/heading",
         indexes=times,
@@ -1041,9 +1064,11 @@ def _frame_at(frames: Sequence[Any], t: float) -> Any:
 
 
 def _poi_at(log: Any, t: float) -> np.ndarray | None:
+    """The POI in the world at ``t`` (a mobile manipulator's hand, :func:`hand_track`)."""
     if len(log.poi_t) == 0:
         return None
-    return np.asarray(log.poi[int(np.argmin(np.abs(log.poi_t - t)))])
+    k = int(np.argmin(np.abs(log.poi_t - t)))
+    return np.asarray(hand_track(log)[k] if len(log.base_t) else log.poi[k])
 
 
 def decision_points(log: Any, tree: Tree) -> list[tuple[float, float, str]]:
@@ -1090,12 +1115,14 @@ def log_log(
     if mobile is None:
         mobile = mobile_view(tree, log, warn)
     tcol = rr.TimeColumn
-    # POI: path taken (static), moving point and coordinates over time.
+    # POI: path taken (static), moving point and coordinates over time; a mobile
+    # manipulator's hand in the world (its base's path is drawn by _log_base).
+    world = hand_track(log)
     if len(log.poi_t):
         rec.log(
             "/world/poi/path",
             rr.LineStrips3D(
-                [log.poi[:, :3]],
+                [world[:, :3]],
                 colors=[_PATH],
                 radii=0.004 if mobile is None else 0.015,
             ),
@@ -1107,7 +1134,7 @@ def log_log(
             "/world/poi",
             indexes=times,
             columns=rr.Points3D.columns(
-                positions=log.poi[:, :3], radii=np.full(n, 0.01), colors=np.tile(_HIGHLIGHT, (n, 1))
+                positions=world[:, :3], radii=np.full(n, 0.01), colors=np.tile(_HIGHLIGHT, (n, 1))
             ),
         )
         for i, axis in enumerate(("x", "y", "z", "yaw")):
@@ -1118,7 +1145,7 @@ def log_log(
             )
         if n > 1:
             dt = np.diff(log.poi_t)
-            step = np.linalg.norm(np.diff(log.poi[:, :3], axis=0), axis=1)
+            step = np.linalg.norm(np.diff(world[:, :3], axis=0), axis=1)
             speed = step / np.where(dt > 0, dt, np.inf)
             rec.send_columns(
                 "/signals/poi/speed",
@@ -1165,7 +1192,8 @@ def log_log(
     _log_decisions(rec, log, tree, warn, mobile)
     if mobile is not None:
         _log_room_histograms(rec, log, tree, points)
-    elif perception:
+    # A mobile manipulator perceives both ways: rooms and scans, and objects.
+    if perception and (mobile is None or len(log.base_t)):
         _log_perception(rec, log, tree, points, warn)
 
 
@@ -1284,6 +1312,9 @@ def _log_decisions(
             rec.log("/world/decisions/goal", point)
         edge = edges.get(str(chosen))
         start = _poi_at(log, t)
+        if edge is not None and edge.smc.action.poi == "base" and len(log.base_t):
+            bt, base = base_track(log)  # a mobile manipulator's drive starts at its base
+            start = base[int(np.argmin(np.abs(bt - t)))]
         if edge is None:
             warn(f"{name}: decision at t={t:.2f} s chose {chosen}, not an edge of this tree")
             continue
@@ -1333,9 +1364,12 @@ def _log_perception(
     for k, (t0, t1, label) in enumerate(points):
         frame = _frame_at(log.frames, t0)
         geom = geometry_at(robot, log, frame.t) if robot is not None else None
+        base = None
+        if len(log.base_t):  # a mobile manipulator's crop box rides its base
+            base = log.base[int(np.argmin(np.abs(log.base_t - frame.t)))]
         try:
-            pts, cols = cloud_from_frame(frame, geom, pp)
-            clusters = clusters_from_frame(frame, geom, pp)
+            pts, cols = cloud_from_frame(frame, geom, pp, base=base)
+            clusters = clusters_from_frame(frame, geom, pp, base)
         except (ValueError, RuntimeError, LogError) as exc:
             warn(f"{name}: perception failed at t={t0:.2f} s ({str(exc).splitlines()[0]})")
             continue
