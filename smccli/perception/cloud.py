@@ -65,6 +65,25 @@ def self_filter_mask(points: np.ndarray, robot: RobotGeometry | None) -> np.ndar
     return keep
 
 
+def _ransac_plane(points: np.ndarray, params: PerceptionParams) -> tuple[np.ndarray, int]:
+    """The biggest plane ``[a, b, c, d]`` (unit normal) by RANSAC (open3d ``segment_plane``)
+    and its inlier count in the subsample."""
+    # RANSAC cost grows with the points scored per iteration; a strided subsample finds
+    # the same plane (the table is most of the cloud) and the refinement uses all points.
+    stride = max(1, len(points) // params.plane_sample)
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[::stride]))
+    # open3d's RANSAC draws random samples; seeding makes the same frame give the same
+    # plane (a least-squares refinement removes the remaining sampling jitter).
+    o3d.utility.random.seed(params.plane_seed)
+    plane, inliers = pcd.segment_plane(
+        distance_threshold=params.plane_distance,
+        ransac_n=3,
+        num_iterations=params.plane_iterations,
+    )
+    plane = np.asarray(plane, dtype=np.float64)
+    return plane / np.linalg.norm(plane[:3]), len(inliers)
+
+
 def fit_table_plane(points: np.ndarray, params: PerceptionParams) -> np.ndarray | None:
     """Fit the table plane with RANSAC (open3d ``segment_plane``), refined by least squares.
 
@@ -73,23 +92,10 @@ def fit_table_plane(points: np.ndarray, params: PerceptionParams) -> np.ndarray 
     """
     if len(points) < 3:
         return None
-    # RANSAC cost grows with the points scored per iteration; a strided subsample finds
-    # the same plane (the table is most of the cloud) and the refinement uses all points.
-    stride = max(1, len(points) // params.plane_sample)
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[::stride]))
-    # open3d's RANSAC draws random samples; seeding makes the same frame give the same
-    # plane (the least-squares refinement below removes the remaining sampling jitter).
-    o3d.utility.random.seed(params.plane_seed)
-    plane, inliers = pcd.segment_plane(
-        distance_threshold=params.plane_distance,
-        ransac_n=3,
-        num_iterations=params.plane_iterations,
-    )
-    plane = np.asarray(plane, dtype=np.float64)
-    plane /= np.linalg.norm(plane[:3])
+    plane, n_inliers = _ransac_plane(points, params)
     if plane[2] < 0:
         plane = -plane
-    if np.arccos(np.clip(plane[2], -1.0, 1.0)) > params.plane_max_tilt or len(inliers) < 3:
+    if np.arccos(np.clip(plane[2], -1.0, 1.0)) > params.plane_max_tilt or n_inliers < 3:
         return None  # the biggest plane is a wall or an object face: no table in view
     # Least-squares refinement on the inliers, iterated to a fixed point: the plane through
     # their mean, normal = direction of least variance. open3d's RANSAC runs on several
@@ -147,16 +153,7 @@ def remove_planes(
     for _ in range(6):
         if len(points) < params.wall_min_points:
             break
-        stride = max(1, len(points) // params.plane_sample)
-        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[::stride]))
-        o3d.utility.random.seed(params.plane_seed)
-        plane, _ = pcd.segment_plane(
-            distance_threshold=params.plane_distance,
-            ransac_n=3,
-            num_iterations=params.plane_iterations,
-        )
-        plane = np.asarray(plane, dtype=np.float64)
-        plane /= np.linalg.norm(plane[:3])
+        plane, _ = _ransac_plane(points, params)
         on = np.abs(plane_distance(points, plane)) < params.plane_distance
         if on.sum() < params.wall_min_points:
             break
