@@ -229,3 +229,33 @@ def test_inspect_shows_the_whole_trace(tree, tmp_path):
     assert rec["/world/lidar/scan"]["rows"] > 0
     assert rec["/world/decisions/clusters"]["rows"] > 0
     assert any(p.startswith("/world/robot/") for p in rec)
+
+
+@pytest.mark.slow
+def test_a_handle_torn_from_the_hand_is_reported_as_slipped(tree, scene):
+    """Once the hand holds the sliding door's handle, the door is yanked 25 cm open (as
+    a person would): the handle leaves the closed hand. Evaluation's watch sees it and the
+    episode's cause is handle_slipped, naming the door."""
+    from smccli.execute.evaluation import HandleWatch, score
+
+    layout = layout_for(scene, 0)
+    sim = Sim(scene, layout)
+    watch = HandleWatch(scene.doors)
+    door = sim.model.jnt_qposadr[sim.model.joint("sliding_door_slide").id]
+    yanked = []
+
+    def on_step(cmd) -> None:
+        watch.watch(sim, cmd)
+        if not yanked and watch.holding("sliding_door") and sim.t > 0:
+            sim.data.qpos[door] += 0.25
+            mujoco.mj_forward(sim.model, sim.data)
+            yanked.append(sim.t)
+
+    executor = TreeExecutor(load_tree(tree), Sensors(sim, on_step=on_step), max_time=40.0)
+    outcome, reason, _, actions, _ = executor.run()
+    verdict = score(
+        sim, scene, layout, outcome=outcome, reason=reason, actions=actions, slips=watch.slipped
+    )
+    sim.close()
+    assert yanked and watch.slipped and watch.slipped[0].startswith("sliding_door")
+    assert verdict.outcome == "handle_slipped", (verdict.outcome, verdict.reason)

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from smccli.errors import OutputError, SceneError, TreeError
-from smccli.execute.evaluation import score
+from smccli.execute.evaluation import HandleWatch, score
 from smccli.execute.executor import ActionTrace, Decision, TreeExecutor
 from smccli.execute.replay_log import ReplayLog
 from smccli.execute.sensing import Sensors
@@ -213,14 +213,18 @@ def episode(
     sim = Sim(scene, layout, drift=drift)
     log = None
     touched: set[str] = set()
+    slips = HandleWatch(scene.doors)
     try:
         if output is not None:
             log = ReplayLog(Path(output), scene, sim, tree, seed, layout, force)
 
         def on_step(cmd: PoiCommand) -> None:
-            # Evaluation's watch, beside control: what a mobile base touches (sim truth).
+            # Evaluation's watch, beside control: what a mobile base touches (sim truth),
+            # and a handle that leaves the closed hand (slips).
             if scene.robot.base is not None:
                 touched.update(sim.robot_contacts())
+            if scene.doors:
+                slips.watch(sim, cmd)
             if log is not None:
                 log.on_step(cmd)
 
@@ -253,6 +257,7 @@ def episode(
         reason=reason,
         actions=actions,
         collisions=sorted(touched),
+        slips=slips.slipped,
     )
     return EpisodeResult(
         outcome=verdict.outcome,

@@ -12,7 +12,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from smccli.execute.executor import CONTROL_OUTCOMES, ActionTrace
-from smccli.world.scene import ROBOT_KEY, Layout, Scene
+from smccli.world.scene import ROBOT_KEY, DoorSpec, Layout, Scene
+from smccli.world.sensors import PoiCommand
 from smccli.world.sim import Sim
 
 OUTCOMES = (
@@ -23,10 +24,51 @@ OUTCOMES = (
     "collision",
     "wrong_room",
     "goal_missed",
+    "handle_slipped",
+    "door_not_opened",
 )
 """Episode outcomes: success, the three control stops, then the failure causes found at
 evaluation time from the trace and the final state (an arm's: grasp_missed,
-object_dropped, placed_outside; a mobile base's: collision, wrong_room, goal_missed)."""
+object_dropped, placed_outside; a mobile base's: collision, wrong_room, goal_missed; a
+mobile manipulator's, before its object's: handle_slipped, door_not_opened)."""
+
+SLIP_TIME = 0.2
+"""A handle held by both fingers, lost for this long while the hand stays closed, slipped [s]."""
+
+
+class HandleWatch:
+    """Evaluation's watch beside control (simulator truth): a door's handle that both
+    fingers held and that then leaves the closed hand has slipped."""
+
+    def __init__(self, doors: Sequence[DoorSpec]) -> None:
+        self.doors = tuple(doors)
+        self._held: dict[str, float | None] = {d.name: None for d in self.doors}
+        """Door -> since when the handle is lost while held (None: held or not held)."""
+        self._holding: dict[str, bool] = {d.name: False for d in self.doors}
+        self.slipped: list[str] = []
+        """``<door> at t=... s`` for each slip."""
+
+    def holding(self, door: str) -> bool:
+        """Both fingers hold ``door``'s handle (or lost it less than SLIP_TIME ago)."""
+        return self._holding[door]
+
+    def watch(self, sim: Sim, cmd: PoiCommand) -> None:
+        """One control period: ``cmd`` was sent, ``sim`` stepped."""
+        closed = cmd.gripper < 0.5
+        for d in self.doors:
+            on = sim.fingers_on(d.handle)
+            if not closed:  # let go on purpose
+                self._holding[d.name], self._held[d.name] = False, None
+            elif on >= 2:
+                self._holding[d.name], self._held[d.name] = True, None
+            elif self._holding[d.name]:
+                since = self._held[d.name]
+                if since is None:
+                    self._held[d.name] = sim.t
+                elif sim.t - since >= SLIP_TIME:
+                    self.slipped.append(f"{d.name} at t={since:.1f} s")
+                    self._holding[d.name], self._held[d.name] = False, None
+
 
 EMPTY_GRIP = 0.08
 """A closed gripper whose opening is below this holds nothing [fraction of full opening]."""
@@ -57,12 +99,17 @@ def score(
     reason: str,
     actions: Sequence[ActionTrace],
     collisions: Sequence[str] = (),
+    slips: Sequence[str] = (),
 ) -> Verdict:
     """Score an episode whose control ended with ``outcome`` (:data:`CONTROL_OUTCOMES`):
     read the final object poses and, when a leaf was reached, the scene's success criterion;
     a leaf without success gets its failure cause (:func:`classify_failure`,
     :func:`classify_base_failure`). ``collisions``: what a mobile base touched during the
-    episode (the floor aside); a base that touched anything failed, wherever it ended."""
+    episode (the floor aside); a base that touched anything failed, wherever it ended.
+    A failed episode of a scene with doors: ``handle_slipped`` when a handle left the
+    closed hand (``slips``, :class:`HandleWatch`), else ``door_not_opened`` when a door
+    ended closed; a slip comes first, a closed door before the control stop or the
+    object's cause (not before a collision)."""
     final = {o.name: [float(v) for v in sim.object_pose(o.name)] for o in scene.objects}
     if scene.robot.base is not None:
         x, y, yaw = sim.base_pose()
@@ -80,6 +127,13 @@ def score(
             outcome = classify_base_failure(scene, sim, final[ROBOT_KEY])
         elif not ok:
             outcome = classify_failure(scene, layout, final, actions, obj)
+    if not ok and scene.doors:
+        # The first cause: a slipped handle leaves its door shut and the base runs into it.
+        closed = [d.name for d in scene.doors if sim.door_opening(d.joint) < d.open]
+        if slips:
+            outcome, reason = "handle_slipped", f"handle slipped: {'; '.join(slips)}; {reason}"
+        elif closed and outcome != "collision":
+            outcome, reason = "door_not_opened", f"{', '.join(closed)} closed; {reason}"
     return Verdict(outcome=outcome, success=ok, reason=reason, manipulated=obj, final_poses=final)
 
 

@@ -145,6 +145,19 @@ class FurnitureSpec:
 
 
 @dataclass(frozen=True, slots=True)
+class DoorSpec:
+    """A door the task opens (evaluation: door_not_opened, handle_slipped)."""
+
+    name: str
+    joint: str
+    """Its joint in the MJCF."""
+    open: float
+    """Joint value from which it counts as open [m or rad]."""
+    handle: str
+    """Its handle's geom."""
+
+
+@dataclass(frozen=True, slots=True)
 class CameraSpec:
     """The RGB-D sensor camera."""
 
@@ -198,6 +211,8 @@ class Scene:
     regions: tuple[tuple[str, tuple[tuple[float, float, float, float], ...]], ...] = ()
     """Named areas of the floor (rooms), each a union of rectangles ``(x_min, x_max, y_min,
     y_max)`` [m]; used to say in which room a base ended (evaluation, inspect)."""
+    doors: tuple[DoorSpec, ...] = ()
+    """Doors the task opens (scene.yaml ``doors``), for the failure causes."""
     furniture: tuple[FurnitureSpec, ...] = ()
     """Bodies of the MJCF a layout moves as a whole; objects ``on`` them move along."""
     perception: tuple[tuple[str, object], ...] = ()
@@ -759,6 +774,7 @@ def _scene(
             for k, v in sorted((raw.get("perception") or {}).items())
         ),
         furniture=_furniture(raw, objects, model, where, yaml_text),
+        doors=_doors(raw, model, where, yaml_text),
     )
 
 
@@ -787,6 +803,25 @@ def _furniture(
                 f"{_at(yaml_text, where, ('objects', i, 'rests_on'))}: no furniture {o.on!r} "
                 f"(furniture: {', '.join(sorted(names)) or 'none'})"
             )
+    return tuple(out)
+
+
+def _doors(
+    raw: Mapping[str, Any], model: mujoco.MjModel, where: str, yaml_text: str
+) -> tuple[DoorSpec, ...]:
+    """The scene file's ``doors``, their joint and handle checked against the MJCF."""
+    out = []
+    for i, d in enumerate(raw.get("doors") or ()):
+        for key, kind in (
+            ("joint", mujoco.mjtObj.mjOBJ_JOINT),
+            ("handle", mujoco.mjtObj.mjOBJ_GEOM),
+        ):
+            if mujoco.mj_name2id(model, kind, str(d[key])) < 0:
+                raise SceneError(
+                    f"{_at(yaml_text, where, ('doors', i, key))}: the MJCF has no "
+                    f"{'joint' if key == 'joint' else 'geom'} {d[key]!r}"
+                )
+        out.append(DoorSpec(str(d["name"]), str(d["joint"]), float(d["open"]), str(d["handle"])))
     return tuple(out)
 
 

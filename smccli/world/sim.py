@@ -493,6 +493,26 @@ class Sim:
             out.append(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, other) or f"geom {other}")
         return out
 
+    def door_opening(self, joint: str) -> float:
+        """A door's joint value now [m or rad] (evaluation only)."""
+        return float(
+            self.data.qpos[self.model.jnt_qposadr[self._id(mujoco.mjtObj.mjOBJ_JOINT, joint)]]
+        )
+
+    def fingers_on(self, geom: str) -> int:
+        """How many finger bodies touch ``geom`` now (evaluation only: a handle held)."""
+        m, d = self.model, self.data
+        g = self._id(mujoco.mjtObj.mjOBJ_GEOM, geom)
+        fingers = self.robot.gripper.joints if self.robot.gripper else ()
+        bodies = {int(m.jnt_bodyid[m.joint(j).id]) for j in fingers}
+        touching = set()
+        for i in range(d.ncon):
+            c = d.contact[i]
+            for a, b in ((c.geom1, c.geom2), (c.geom2, c.geom1)):
+                if a == g and int(m.geom_bodyid[b]) in bodies:
+                    touching.add(int(m.geom_bodyid[b]))
+        return len(touching)
+
     def has_body(self, name: str) -> bool:
         """Whether the scene's MJCF has a body ``name`` (a door's handle, for the operator)."""
         return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name) >= 0
