@@ -2,7 +2,9 @@
 
 The robot file decides the mode. An arm moves its POI target one step per key press; a
 mobile base (``robot.base`` set, no arm) is driven by holding keys, like a game or a
-TidyBot / ManiSkill teleop. Key presses arrive on the viewer's thread; they are queued and
+TidyBot / ManiSkill teleop; a mobile manipulator does both, Tab switching between its base
+and its arm (the hand's target in the base's frame), the mode shown in the viewer. Key
+presses arrive on the viewer's thread; they are queued and
 applied in the simulation loop, which keeps real time. The viewer is closed explicitly at
 the end (a passive viewer left open can hang the process on exit).
 
@@ -96,6 +98,13 @@ BASE_HELP = (
     "keyboard operator ready (mobile base, hold keys to drive): Up/Down forward/back, "
     "Left/Right strafe, Q/E turn, Shift half speed, M mark, Enter finish, X discard"
 )
+MM_HELP = (
+    "keyboard operator ready (mobile manipulator, Tab switches base/arm, shown top left): "
+    "base: hold Up/Down/Left/Right/Q/E to drive, Shift half speed; arm (in the base's "
+    "frame): arrows x/y, PgUp/PgDn z, Q/E yaw, G gripper; M mark, Enter finish, X discard"
+)
+KEY_TAB = 258
+"""Switches a mobile manipulator between driving its base and moving its hand."""
 STEP_M = 0.01
 STEP_YAW = math.radians(5)
 BINDINGS = {
@@ -246,9 +255,20 @@ class KeyboardOperator:
         self._on_ready = on_ready
         self.discarded = False
         """True once the operator pressed X: the recording is thrown away."""
-        self.base = sim.robot.base is not None and not sim.robot.arm_joints
-        """True for a mobile base: hold keys to drive (else: an arm, a step per press)."""
-        self.driver = BaseDriver(self.target, sim.control_period) if self.base else None
+        self.mobile_manipulator = sim.mobile_manipulator
+        """Base and arm: Tab switches what the keys move (:attr:`mode`)."""
+        self.mode = "base" if self.mobile_manipulator else None
+        """A mobile manipulator's mode: ``base`` (hold keys to drive) or ``arm`` (a step per
+        press, the hand's target in the base's frame); shown in the viewer."""
+        self.base = (
+            sim.robot.base is not None and not sim.robot.arm_joints
+        ) or self.mobile_manipulator
+        """The keys drive a base while held (a mobile base; a mobile manipulator in mode
+        ``base``); else an arm, a step per press."""
+        self.base_target = self._base_pose() if self.mobile_manipulator else None
+        """A mobile manipulator's base target ``[x, y, 0, yaw]`` (odometry's frame)."""
+        start = self.base_target if self.base_target is not None else self.target
+        self.driver = BaseDriver(start, sim.control_period) if self.base else None
         self._window: Any = None  # GLFW window of the viewer (first key callback)
         self._pressed_at: dict[int, float] = {}
         self._t0_wall: float | None = None  # real time starts at the first tick
@@ -272,7 +292,7 @@ class KeyboardOperator:
             self.viewer.opt.geomgroup[sim.robot.geom_group] = 1
             # Visualisation flags the viewer toggles on letters this operator uses (and, for
             # a base, on A and D: W/A/S/D come to hand, and D would hide the walls).
-            keys = (*DRIVE, *EVENTS, ord("A"), ord("D")) if self.base else BINDINGS
+            keys = (*DRIVE, *EVENTS, ord("A"), ord("D"), *BINDINGS) if self.base else BINDINGS
             letters = {chr(k) for k in keys if ord("A") <= k <= ord("Z")}
             self._flags = {
                 i: int(self.viewer.opt.flags[i])
@@ -280,12 +300,45 @@ class KeyboardOperator:
                 if key in letters
             }
             if self.base:
-                pose = sim.poi()
+                pose = self._base_pose() if self.mobile_manipulator else sim.poi()
                 cam = self.viewer.cam
                 cam.type = mujoco.mjtCamera.mjCAMERA_TRACKING
-                cam.trackbodyid = int(sim.model.site_bodyid[sim.poi_id])
+                cam.trackbodyid = (
+                    int(sim.model.body_rootid[sim.model.site_bodyid[sim.poi_id]])
+                    if self.mobile_manipulator
+                    else int(sim.model.site_bodyid[sim.poi_id])
+                )
                 # From above and behind: over the walls (2 m high), facing the base's +x.
                 cam.distance, cam.elevation, cam.azimuth = 4.0, -70.0, float(np.degrees(pose[3]))
+
+    def _base_pose(self) -> np.ndarray:
+        """A mobile manipulator's base pose ``[x, y, 0, yaw]`` from odometry."""
+        x, y, yaw = self.sim.base_odometry()
+        return np.array([x, y, 0.0, yaw])
+
+    @property
+    def driving(self) -> bool:
+        """The keys drive the base this tick (held keys), else they step the arm."""
+        return self.base and self.mode != "arm"
+
+    def _show_mode(self) -> None:
+        """The mode, top left of the viewer (a mobile manipulator's)."""
+        import mujoco
+
+        text = (
+            ("BASE", "hold arrows, Q/E to drive; Tab: arm")
+            if self.mode == "base"
+            else ("ARM", "arrows x/y, PgUp/PgDn z, Q/E yaw, G grip; Tab: base")
+        )
+        grip = "open" if self.gripper > 0.5 else "closed"
+        self.viewer.set_texts(
+            (
+                mujoco.mjtFontScale.mjFONTSCALE_150,
+                mujoco.mjtGridPos.mjGRID_TOPLEFT,
+                "mode\ngripper",
+                f"{text[0]} ({text[1]})\n{grip}",
+            )
+        )
 
     def _on_key(self, key: int) -> None:
         """The viewer's key callback (its thread): queue the press; note the window."""
@@ -326,8 +379,11 @@ class KeyboardOperator:
                 key = self.keys.get_nowait()
             except queue.Empty:
                 break
-            kind, delta = key_action(key, self.base)
-            if self.base and key in HELD:
+            if key == KEY_TAB and self.mobile_manipulator:
+                self.mode = "arm" if self.mode == "base" else "base"
+                continue
+            kind, delta = key_action(key, self.driving)
+            if self.driving and key in HELD:
                 pressed.add(key)
             if kind == "move" and delta is not None:
                 self.target = self.target + delta
@@ -339,7 +395,10 @@ class KeyboardOperator:
                 done = True
             elif kind == "discard":
                 done = discard = True
-        if self.driver is not None:
+        if self.driver is not None and self.mobile_manipulator:
+            held = self._held(pressed) if self.driving else set()
+            self.base_target = self.driver.update(held, self._base_pose())
+        elif self.driver is not None:
             self.target = self.driver.update(self._held(pressed), self.sim.poi())
         if not self.viewer.is_running():
             done = True
@@ -354,12 +413,15 @@ class KeyboardOperator:
         with self.viewer.lock():
             for i, v in self._flags.items():
                 self.viewer.opt.flags[i] = v
+        if self.mobile_manipulator:
+            self._show_mode()
         self.viewer.sync()
         if self._on_ready is not None:
             # The viewer has drawn and is reading keys: tell the person (and tests).
-            self._on_ready(BASE_HELP if self.base else HELP)
+            self._on_ready(MM_HELP if self.mobile_manipulator else BASE_HELP if self.base else HELP)
             self._on_ready = None
-        cmd = PoiCommand(t=self.sim.t, target=self.target.copy(), gripper=self.gripper)
+        base = None if self.base_target is None else self.base_target[[0, 1, 3]].copy()
+        cmd = PoiCommand(t=self.sim.t, target=self.target.copy(), gripper=self.gripper, base=base)
         self.discarded = self.discarded or discard
         return OperatorOutput(command=cmd, marks=tuple(marks), done=done)
 
