@@ -84,8 +84,13 @@ def test_sample_layout_in_ranges_without_overlap() -> None:
             optional = set().union(*variants) if variants else set()
             present = set(layout) & optional
             assert not variants or present in variants  # exactly one variant's objects
+            for f in scene.furniture:  # moved as a whole, within its ranges
+                x, y, _, yaw = layout[f.name]
+                assert f.range_x[0] <= x <= f.range_x[1] and f.range_y[0] <= y <= f.range_y[1]
+                assert f.range_yaw[0] <= yaw <= f.range_yaw[1]
             for o in scene.objects:
-                if o.name not in layout:
+                # On furniture, the ranges hold in its nominal frame (test_loco_manip.py).
+                if o.name not in layout or o.on is not None:
                     continue
                 x, y, _, yaw = layout[o.name]
                 assert o.range_x[0] <= x <= o.range_x[1]
@@ -97,7 +102,8 @@ def test_sample_layout_in_ranges_without_overlap() -> None:
                 assert st.range_x[0] <= x <= st.range_x[1]
                 assert st.range_y[0] <= y <= st.range_y[1]
                 assert st.range_yaw[0] <= yaw <= st.range_yaw[1]
-            names = [n for n in layout if n != ROBOT_KEY]
+            furniture = {f.name for f in scene.furniture}
+            names = [n for n in layout if n != ROBOT_KEY and n not in furniture]
             for i, a in enumerate(names):
                 for b in names[i + 1 :]:
                     d = math.dist(layout[a][:2], layout[b][:2])
@@ -107,7 +113,8 @@ def test_sample_layout_in_ranges_without_overlap() -> None:
             scene, np.random.default_rng(3)
         )
         robot = {ROBOT_KEY} if scene.start is not None else set()
-        assert set(nominal_layout(scene)) == {o.name for o in scene.objects} | robot
+        furniture = {f.name for f in scene.furniture}
+        assert set(nominal_layout(scene)) == {o.name for o in scene.objects} | robot | furniture
         for variant, names in scene.variants:
             assert set(names) <= set(nominal_layout(scene, variant))
 
@@ -222,7 +229,8 @@ BROKEN_SCENES = {
         "    colour: [0.5, 0.5, 0.5, 1]",
         "objects[1].colour",
         "colour:",
-        "unknown key 'colour' (valid: name, shape, size, rgba, mass, pose, range, fixed, wall)",
+        "unknown key 'colour' (valid: name, shape, size, rgba, mass, pose, range, fixed, "
+        "rests_on, wall)",
     ),
     "missing key": (
         "    pose: [0.58, -0.08, 0.03, -0.4]\n",

@@ -107,9 +107,9 @@ def score(
     :func:`classify_base_failure`). ``collisions``: what a mobile base touched during the
     episode (the floor aside); a base that touched anything failed, wherever it ended.
     A failed episode of a scene with doors: ``handle_slipped`` when a handle left the
-    closed hand (``slips``, :class:`HandleWatch`), else ``door_not_opened`` when a door
-    ended closed; a slip comes first, a closed door before the control stop or the
-    object's cause (not before a collision)."""
+    closed hand (``slips``, :class:`HandleWatch`), else ``door_not_opened`` when a leaf
+    was reached with a door shut; a slip comes first (it explains a later stop), a shut
+    door before the object's cause (a control stop and a collision say more)."""
     final = {o.name: [float(v) for v in sim.object_pose(o.name)] for o in scene.objects}
     if scene.robot.base is not None:
         x, y, yaw = sim.base_pose()
@@ -132,7 +132,7 @@ def score(
         closed = [d.name for d in scene.doors if sim.door_opening(d.joint) < d.open]
         if slips:
             outcome, reason = "handle_slipped", f"handle slipped: {'; '.join(slips)}; {reason}"
-        elif closed and outcome != "collision":
+        elif closed and outcome not in ("collision", *CONTROL_OUTCOMES[1:]):
             outcome, reason = "door_not_opened", f"{', '.join(closed)} closed; {reason}"
     return Verdict(outcome=outcome, success=ok, reason=reason, manipulated=obj, final_poses=final)
 
