@@ -21,9 +21,9 @@ from smccli.record.session import RecordConfig, record
 pytestmark = pytest.mark.slow
 
 
-N_BENCH = 12
+N_BENCH = 10
 """bench_pick demonstrations, each from its own random layout (the README's compile figure
-has 100; 12 keep `make test` within its budget and still span the white box's ranges)."""
+has 100; 10 keep `make test` within its budget and still span the white box's ranges)."""
 N_PAIRS = 6
 """weigh_sort light/heavy pairs, each demonstration from its own random layout."""
 

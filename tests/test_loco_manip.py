@@ -152,12 +152,12 @@ def test_replay_on_a_random_layout(tree, tmp_path):
 
 @pytest.mark.slow
 def test_small_campaign(tree):
-    """8 random layouts (campaign seed 0): measured 7 of 8 (README: the 100-trial rate).
+    """6 random layouts (campaign seed 0): measured 5 of 6 (README: the 100-trial rate).
     A failure is a stop at a decision whose perception did not match (the object or the
     bar seen partly hidden); the robot never ends in a collision or with the object
     dropped."""
-    summary = run_campaign(tree, trials=8, seed=0, workers=2)
-    assert summary["successes"] >= 6, summary["failures"]
+    summary = run_campaign(tree, trials=6, seed=0, workers=2)
+    assert summary["successes"] >= 5, summary["failures"]
     causes = {cause for cause, n in summary["failures"].items() if n}
     assert causes <= {"no_contingent_smc"}, summary["failures"]
 
