@@ -442,10 +442,7 @@ def sample_layout(
             layout[o.name] = (x, y, o.pose[2], yaw)
         if scene.start is not None:
             st = scene.start
-            x, y, yaw = (
-                float(rng.uniform(lo, hi)) if lo < hi else lo
-                for lo, hi in (st.range_x, st.range_y, st.range_yaw)
-            )
+            x, y, yaw = _draw(rng, st.range_x, st.range_y, st.range_yaw)
             layout[ROBOT_KEY] = (x, y, 0.0, yaw)
         if not _overlaps(scene, layout, gap):
             return layout
