@@ -22,6 +22,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from smccli.execute.campaign import run_campaign  # noqa: E402
 from smccli.execute.episode import layout_for, run_episode  # noqa: E402
 from smccli.execute.executor import TreeExecutor  # noqa: E402
+from smccli.execute.policy import TreePolicy  # noqa: E402
 from smccli.execute.sensing import Sensors  # noqa: E402
 from smccli.learn.compile import compile_logs  # noqa: E402
 from smccli.learn.tree import ROOT, load_tree  # noqa: E402
@@ -116,6 +117,23 @@ def test_tree_merges_up_to_the_grasp_then_branches_by_object(tree):
         for e in branches
     }
     assert "green" in names and len(names) == 2
+
+
+def test_a_tucked_hand_keeps_the_taught_wrist(tree, scene):
+    # Tucking the hand after the wardrobe's bar is a posture in the base's frame: a wrist
+    # turned by the gripper's half turn holds the same way but swings the elbow in front
+    # of the head camera, so the taught yaw is kept whatever the wrist's start.
+    t = load_tree(tree)
+    tucks = [e for e in t.edges if e.smc.action.goal_frame == "base" and e.smc.action.poi == "hand"]
+    assert tucks
+    policy = TreePolicy(t, scene.robot)
+    base = np.array([4.05, 0.41, -0.08])
+    for edge in tucks:
+        a = edge.smc.action
+        for start_yaw in (a.goal[3] + base[2] + 2.9, a.goal[3] + base[2] - 2.9):
+            start = np.array([4.5, 0.1, 0.95, start_yaw])
+            goal = policy.map_goal(a, None, start, edge.id, None, base)
+            assert abs(math.remainder(goal[3] - base[2] - a.goal[3], 2 * math.pi)) < 1e-9
 
 
 def test_layouts_move_the_wardrobe_and_what_rests_on_it(scene):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import functools
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -125,6 +126,22 @@ def test_goal_yaw_uses_symmetry_to_turn_the_wrist_least():
     local = goal_in_object(np.array([0.5, 0.0, 0.03, 0.3]), cluster)  # dyaw = 0
     g = goal_from_object(local, cluster, near_yaw=0.3 + 2 * math.pi / 2 - 0.1)
     assert abs(g[3] - (0.3 + math.pi)) < 1e-9
+
+
+@pytest.mark.parametrize("turn", [0.08, -0.08])
+def test_offset_stays_on_the_taught_side_when_the_yaw_wraps(turn):
+    # A bar handle (period pi) taught at yaw pi/2 - 1 mrad; its cluster's centre sits 15 mm
+    # behind the bar (the posts), so the grasp is 15 mm in front of it. Turned 0.08 rad,
+    # the footprint's yaw wraps to the other end of [-pi/2, pi/2), and the gripper's pi
+    # gives the same wrist yaw from both object yaws: the taught yaw settles the side.
+    bar = replace(_cluster(3, size=(0.16, 0.05, 0.02)), yaw=math.pi / 2 - 1e-3, yaw_period=math.pi)
+    goal_w = np.array([bar.centroid[0] - 0.015, bar.centroid[1], bar.centroid[2], math.pi / 2])
+    local = goal_in_object(goal_w, bar)
+    now_yaw = math.remainder(bar.yaw + turn, math.pi)
+    now = replace(bar, yaw=now_yaw)
+    g = goal_from_object(local, now, near_yaw=0.0, taught_yaw=bar.yaw)
+    expect = bar.centroid[:2] - 0.015 * np.array([math.cos(turn), math.sin(turn)])
+    np.testing.assert_allclose(g[:2], expect, atol=1e-9)
 
 
 def test_pick_place_demos_give_two_root_edges():

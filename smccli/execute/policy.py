@@ -513,7 +513,9 @@ class TreePolicy:
             base_now = np.array([obs.base[0], obs.base[1], 0.0, obs.base[2]])
         start = base_now if a.poi == "base" else obs.poi
         assert start is not None
-        goal = self.map_goal(a, cluster, start, edge.id, obs.lidar_pose, obs.base)
+        goal = self.map_goal(
+            a, cluster, start, edge.id, obs.lidar_pose, obs.base, edge.smc.perception.cluster
+        )
         duration = action_duration(a, start, goal)
         dec = replace(dec, mapped_goal=goal, duration=duration)
         base_goal = None
@@ -731,11 +733,13 @@ class TreePolicy:
         edge: str | None = None,
         lidar_pose: np.ndarray | None = None,
         base: np.ndarray | None = None,
+        taught: Cluster | None = None,
     ) -> np.ndarray:
         """Contingent action mapping of the goal (eq. 38-39, 46): ``start`` the POI now,
-        ``cluster`` the context cluster the SMC matched; a scan-frame goal needs the
-        ``edge`` whose scan was aligned at the last decision and the ``lidar_pose`` now;
-        a goal in a mobile manipulator's base frame needs the ``base`` pose [x, y, yaw]."""
+        ``cluster`` the context cluster the SMC matched (``taught``: the demonstrated one);
+        a scan-frame goal needs the ``edge`` whose scan was aligned at the last decision and
+        the ``lidar_pose`` now; a goal in a mobile manipulator's base frame needs the
+        ``base`` pose [x, y, yaw]."""
         if action.goal_frame == "scan":
             # G_now = L_now * T^-1 * G_rel, T = the current lidar in the demo lidar's frame,
             # from the alignment that matched the scan (_match_base).
@@ -763,13 +767,20 @@ class TreePolicy:
         flip = asymmetric < TWO_PI - 1e-6
         if action.goal_frame == "object" and cluster is not None:
             flip = flip and cluster.yaw_period < TWO_PI - 1e-6
-            goal = goal_from_object(action.goal, cluster, near_yaw=float(start[3]), flip=flip)
+            taught_yaw = None if taught is None else float(taught.yaw)
+            goal = goal_from_object(
+                action.goal, cluster, near_yaw=float(start[3]), flip=flip, taught_yaw=taught_yaw
+            )
         else:
             goal = np.array(action.goal, dtype=float)
             if action.goal_frame == "base":  # a mobile manipulator's hand, relative to it
                 if base is None:
                     raise SmcError(f"edge {edge}: a goal in the base's frame needs its pose")
                 goal = hand_in_world(base, goal)
+                # A pose of the hand relative to the base is a posture: the wrist ends as
+                # taught, not by the gripper's half turn, which swings the elbow elsewhere
+                # (measured: the tucked arm then hid the shelf from the head camera).
+                flip = False
             if flip:
                 goal[3] = start[3] + math.remainder(float(goal[3] - start[3]), math.pi)
         goal[3] = start[3] + wrap(float(goal[3] - start[3]))

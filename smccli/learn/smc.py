@@ -301,7 +301,12 @@ def pose_from_pose(frame: np.ndarray, rel: np.ndarray) -> np.ndarray:
 
 
 def goal_from_object(
-    goal_obj: np.ndarray, cluster: Cluster, near_yaw: float, *, flip: bool = True
+    goal_obj: np.ndarray,
+    cluster: Cluster,
+    near_yaw: float,
+    *,
+    flip: bool = True,
+    taught_yaw: float | None = None,
 ) -> np.ndarray:
     """Contingent action mapping of the goal (eq. 38-39): object-frame goal -> world.
 
@@ -310,21 +315,33 @@ def goal_from_object(
     the wrist turns as little as possible. The offset turns with the chosen object yaw.
     ``flip=False`` forbids the gripper's pi: an object without symmetry that is grasped or
     held keeps its orientation in the hand, so it is not placed turned by pi.
+
+    The gripper's pi and an object's half-turn symmetry give the same goal yaw from two
+    object yaws a half turn apart, which put the offset on opposite sides of the centre.
+    ``taught_yaw`` (the demonstrated cluster's yaw [rad]) settles that tie: the object yaw
+    nearest it keeps the offset on the side it was taught, e.g. towards the camera when the
+    cluster's centre sits behind a bar handle (its posts pull it back). Without it the
+    tie went to whichever side the footprint's yaw wrapped to (3 cm off a handle).
     """
     base = object_yaw(cluster)
     period = cluster.yaw_period if cluster.yaw_period > 0 else math.pi
-    best: tuple[float, float, float] | None = None
+    best: tuple[float, float, float, float] | None = None
     for k_obj in range(-4, 5):
         obj_yaw = base + k_obj * period
         if cluster.yaw_period <= 0 and k_obj != 0:
             continue
+        turn = 0.0 if taught_yaw is None else abs(wrap_angle(obj_yaw - taught_yaw))
         for k_grip in range(-2, 3) if flip else range(-1, 2):
             yaw = obj_yaw + goal_obj[3] + k_grip * (math.pi if flip else TWO_PI)
             dist = abs(yaw - near_yaw)
-            if best is None or dist < best[0] - 1e-9:
-                best = (dist, yaw, obj_yaw)
+            if (
+                best is None
+                or dist < best[0] - 1e-9
+                or (dist < best[0] + 1e-9 and turn < best[3] - 1e-9)
+            ):
+                best = (dist, yaw, obj_yaw, turn)
     assert best is not None
-    _, yaw, obj_yaw = best
+    _, yaw, obj_yaw, _ = best
     c, s = math.cos(obj_yaw), math.sin(obj_yaw)
     dx, dy, dz = goal_obj[:3]
     centre = cluster.centroid
