@@ -330,6 +330,8 @@ def _print_campaign(summary: dict[str, Any]) -> None:
             f" ratio p50 {dur['ratio_p50']:.2f}); {summary['trials_per_second']:.2f} "
             "trials/s"
         )
+    if summary.get("cluster"):
+        out.print(f"ran on the Dask cluster at {summary['cluster']}: {summary['workers']} workers")
 
 
 @app.command()
@@ -351,6 +353,13 @@ def replay(
     workers: Annotated[
         int, typer.Option(help="Processes for a campaign (default: all cores).")
     ] = 0,
+    cluster: Annotated[
+        str | None,
+        typer.Option(
+            help="Run the campaign's trials on the workers of this Dask scheduler "
+            "(e.g. tcp://10.0.0.5:8786) instead of local processes."
+        ),
+    ] = None,
     min_success: Annotated[
         float | None, typer.Option(help="Exit 1 if the campaign's success rate is below this.")
     ] = None,
@@ -370,6 +379,10 @@ def replay(
     from smccli.world.sim import OdometryDrift
 
     drift = OdometryDrift(odometry_drift, odometry_drift) if odometry_drift > 0 else None
+    if cluster is not None and trials <= 0:
+        raise SmcError("--cluster runs a campaign's trials: give --trials N")
+    if cluster is not None and workers:
+        raise SmcError("--workers counts local processes; with --cluster the cluster's run")
 
     if trials > 0:
         with Progress(
@@ -396,6 +409,7 @@ def replay(
                 force=force,
                 on_trial=on_trial,
                 drift=drift,
+                cluster=cluster,
             )
         _print_campaign(summary)
         if min_success is not None and summary["success_rate"] < min_success:

@@ -174,8 +174,8 @@ def test_small_campaign(tree):
     A failure is a stop at a decision whose perception did not match (the object or the
     bar seen partly hidden); the robot never ends in a collision or with the object
     dropped."""
-    summary = run_campaign(tree, trials=6, seed=0, workers=2)
-    assert summary["successes"] >= 5, summary["failures"]
+    summary = run_campaign(tree, trials=4, seed=0, workers=2)
+    assert summary["successes"] >= 3, summary["failures"]
     causes = {cause for cause, n in summary["failures"].items() if n}
     assert causes <= {"no_contingent_smc"}, summary["failures"]
 

@@ -4,7 +4,9 @@ Trial ``i`` of a campaign with seed ``S`` runs on ``sample_layout(scene,
 np.random.default_rng([S, i]))``, so a campaign gives the same layouts and the same results
 whatever the number of workers (each trial is a fresh simulation; perception and control are
 deterministic). Workers are processes of the ``spawn`` context: EGL contexts do not survive
-``fork``. Campaigns write no replay log and render only at decision points.
+``fork``; or the workers of an existing Dask cluster (``cluster``: its scheduler's
+address), each trial one task. Campaigns write no replay log and render only at decision
+points.
 
 Statistics: success rate with a Wilson 95 % interval; success by distance band of the
 manipulated object's start from its nominal (demonstrated) position (paper Fig. 11);
@@ -22,7 +24,7 @@ import json  # noqa: E402
 import math  # noqa: E402
 import multiprocessing as mp  # noqa: E402
 import time  # noqa: E402
-from collections.abc import Callable, Sequence  # noqa: E402
+from collections.abc import Callable, Iterator, Sequence  # noqa: E402
 from dataclasses import asdict, dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
@@ -143,6 +145,58 @@ def _work(index: int) -> TrialResult:
     return run_trial(w["tree"], w["scene"], w["seed"], index, w["drift"])
 
 
+CLUSTER_TIMEOUT = 10.0
+"""How long a Dask scheduler has to answer, and to have a worker [s]."""
+
+
+def cluster_client(address: str):
+    """A ``distributed.Client`` of the Dask scheduler at ``address`` with at least one
+    worker; an :class:`SmcError` naming the address when there is none."""
+    from distributed import Client
+
+    try:
+        client = Client(address, timeout=f"{CLUSTER_TIMEOUT}s", set_as_default=False)
+    except (OSError, TimeoutError, ValueError, TypeError) as e:
+        why = (str(e).splitlines() or [type(e).__name__])[0]
+        raise SmcError(
+            f"--cluster {address}: no Dask scheduler answered there within "
+            f"{CLUSTER_TIMEOUT:.0f} s ({why})"
+        ) from None
+    try:
+        client.wait_for_workers(1, timeout=CLUSTER_TIMEOUT)
+    except TimeoutError:
+        client.close()
+        raise SmcError(
+            f"--cluster {address}: the scheduler has no worker (start some with "
+            f"`dask worker {address}`)"
+        ) from None
+    return client
+
+
+def _cluster_trials(
+    tree: Tree,
+    scene: Scene,
+    seed: int,
+    drift: OdometryDrift | None,
+    todo: list[int],
+    address: str,
+) -> Iterator[TrialResult]:
+    """Each trial of ``todo`` as one task on the Dask cluster at ``address``, yielded as
+    they finish. The tree and the scene go to every worker once, not with each task."""
+    from distributed import as_completed
+
+    with cluster_client(address) as client:
+        tree_f, scene_f = client.scatter([tree, scene], broadcast=True, hash=False)
+        futures = [
+            client.submit(run_trial, tree_f, scene_f, seed, i, drift, pure=False) for i in todo
+        ]
+        try:
+            for fut in as_completed(futures, loop=client.loop):
+                yield fut.result()
+        finally:
+            client.cancel(futures)
+
+
 def run_trials(
     tree: Tree,
     scene: Scene,
@@ -153,28 +207,35 @@ def run_trials(
     on_trial: Callable[[int, int], None] | None = None,
     indices: Sequence[int] | None = None,
     drift: OdometryDrift | None = None,
+    cluster: str | None = None,
 ) -> list[TrialResult]:
-    """Run the trials (``range(trials)`` or ``indices``) over ``workers`` processes;
-    results in index order. ``on_trial(done, successes)`` after each."""
+    """Run the trials (``range(trials)`` or ``indices``) over ``workers`` processes, or on
+    the Dask cluster whose scheduler is at ``cluster``; results in index order, the same
+    either way. ``on_trial(done, successes)`` after each."""
     todo = list(range(trials)) if indices is None else list(indices)
     results: list[TrialResult] = []
     ok = 0
-    if workers <= 1 or len(todo) <= 1:
+
+    def done(res: TrialResult) -> None:
+        nonlocal ok
+        results.append(res)
+        ok += res.success
+        if on_trial:
+            on_trial(len(results), ok)
+
+    if cluster is not None:
+        for res in _cluster_trials(tree, scene, seed, drift, todo, cluster):
+            done(res)
+    elif workers <= 1 or len(todo) <= 1:
         for i in todo:
-            results.append(run_trial(tree, scene, seed, i, drift))
-            ok += results[-1].success
-            if on_trial:
-                on_trial(len(results), ok)
+            done(run_trial(tree, scene, seed, i, drift))
     else:
         ctx = mp.get_context("spawn")
         with ctx.Pool(
             min(workers, len(todo)), initializer=_init_worker, initargs=(tree, scene, seed, drift)
         ) as pool:
             for res in pool.imap_unordered(_work, todo, chunksize=1):
-                results.append(res)
-                ok += res.success
-                if on_trial:
-                    on_trial(len(results), ok)
+                done(res)
     return sorted(results, key=lambda r: r.index)
 
 
@@ -269,8 +330,11 @@ def run_campaign(
     on_trial: Callable[[int, int], None] | None = None,
     force: bool = False,
     drift: OdometryDrift | None = None,
+    cluster: str | None = None,
 ) -> dict[str, Any]:
     """``smc replay TREE --trials N --seed S --workers W [--report FILE]``: the summary.
+    ``cluster``: the address of a Dask scheduler whose workers run the trials instead
+    (``--cluster``; ``workers`` is then theirs).
 
     The report is checked before the first trial (folder writable; an existing file needs
     ``force``) and written atomically.
@@ -281,8 +345,18 @@ def run_campaign(
         check_output(report, force=force)
     t, sc = resolve(tree, scene)
     wall0 = time.perf_counter()
+    if cluster is not None:
+        with cluster_client(cluster) as client:  # fail before the first trial, not after
+            workers = len(client.scheduler_info()["workers"])
     results = run_trials(
-        t, sc, trials=trials, seed=seed, workers=workers, on_trial=on_trial, drift=drift
+        t,
+        sc,
+        trials=trials,
+        seed=seed,
+        workers=workers,
+        on_trial=on_trial,
+        drift=drift,
+        cluster=cluster,
     )
     summary = summarize(
         results,
@@ -296,6 +370,7 @@ def run_campaign(
     summary["tree"] = None if isinstance(tree, Tree) else str(tree)
     summary["note"] = scene_note(t, sc)
     summary["odometry_drift"] = None if drift is None else asdict(drift)
+    summary["cluster"] = cluster
     if report is not None:
         write_atomic(report, json.dumps(summary, indent=1, allow_nan=False) + "\n")
     return summary

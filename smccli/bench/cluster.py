@@ -1,0 +1,100 @@
+"""Campaign throughput against workers: ``python -m smccli.bench.cluster``.
+
+The sample ``bench_pick`` tree, ``--trials`` (40) trials with the same seed, run by local
+processes (``--workers``) and by a Dask ``LocalCluster`` on 127.0.0.1 (``--cluster``) with
+1 and 2 workers (this machine's cores). Every run must give the same outcomes: the table
+is only worth reading if scale-out changes nothing but the wall time.
+
+Writes ``docs/bench_cluster.json`` (``--out``).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+from smccli.bench.meta import machine  # noqa: E402
+from smccli.bench.paper import REPO  # noqa: E402
+from smccli.execute.campaign import run_campaign  # noqa: E402
+from smccli.learn.compile import compile_logs  # noqa: E402
+from smccli.outputs import check_output, write_atomic  # noqa: E402
+
+
+def _outcomes(summary: dict[str, Any]) -> list[tuple[int, str]]:
+    return [(r["index"], r["outcome"]) for r in summary["trial_results"]]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--trials", type=int, default=40)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--max-workers", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--out", type=Path, default=REPO / "docs" / "bench_cluster.json")
+    args = ap.parse_args(argv)
+    check_output(args.out, force=True)
+    from distributed import LocalCluster
+
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = Path(tmp) / "bench_pick.json"
+        compile_logs(sorted((REPO / "sample_logs" / "bench_pick").glob("*.mcap")), tree)
+        rows: list[dict[str, Any]] = []
+        reference: list[tuple[int, str]] | None = None
+        for n in range(1, args.max_workers + 1):
+            for runner in ("processes", "dask"):
+                if runner == "processes":
+                    s = run_campaign(tree, trials=args.trials, seed=args.seed, workers=n)
+                else:
+                    with LocalCluster(
+                        n_workers=n,
+                        threads_per_worker=1,
+                        processes=True,
+                        host="127.0.0.1",
+                        dashboard_address=None,
+                    ) as cluster:
+                        s = run_campaign(
+                            tree,
+                            trials=args.trials,
+                            seed=args.seed,
+                            cluster=cluster.scheduler_address,
+                        )
+                reference = reference or _outcomes(s)
+                if _outcomes(s) != reference:
+                    print(f"{runner} x {n}: outcomes differ from the first run", file=sys.stderr)
+                    return 1
+                rows.append(
+                    {
+                        "runner": runner,
+                        "workers": n,
+                        "trials": args.trials,
+                        "successes": s["successes"],
+                        "wall_s": s["wall_s"],
+                        "trials_per_second": s["trials_per_second"],
+                    }
+                )
+                print(
+                    f"{runner:9s} {n} workers: {s['successes']}/{args.trials}, "
+                    f"{s['wall_s']:.1f} s, {s['trials_per_second']:.2f} trials/s",
+                    flush=True,
+                )
+    result = {
+        "machine": machine(),
+        "command": "python -m smccli.bench.cluster " + " ".join(argv or sys.argv[1:]),
+        "scene": "bench_pick",
+        "seed": args.seed,
+        "rows": rows,
+    }
+    write_atomic(args.out, json.dumps(result, indent=1) + "\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
