@@ -71,6 +71,7 @@ bench: setup
 	$(PY) -m smccli.bench.compile
 	$(PY) -m smccli.bench.paper
 	$(PY) -m smccli.bench.rooms
+	$(PY) -m smccli.bench.cluster
 
 lint: setup
 	$(VENV)/bin/ruff check smccli tests
