@@ -334,9 +334,41 @@ def _print_campaign(summary: dict[str, Any]) -> None:
         out.print(f"ran on the Dask cluster at {summary['cluster']}: {summary['workers']} workers")
 
 
+def _print_verification(v: Any) -> None:
+    """The divergence of a re-simulated log over time and its verdict; exit 1 when the POI
+    or a finger strayed beyond its tolerance."""
+    from smccli.execute.verify import FINGER_TOLERANCE, POI_TOLERANCE
+
+    table = Table("t [s]", "POI error [mm]", "finger error [mm]", "other joints [mrad]")
+    n = len(v.t)
+    for i in sorted({int(k * (n - 1) / 10) for k in range(11)} if n else set()):
+        table.add_row(
+            f"{v.t[i]:.2f}",
+            f"{1e3 * v.poi_error[i]:.4f}",
+            f"{1e3 * v.finger_error[i]:.4f}",
+            f"{1e3 * v.joint_error[i]:.4f}",
+        )
+    out.print(table)
+    verdict = "[red]diverges[/]" if v.divergent else "[green]reproduces what it recorded[/]"
+    first = (
+        "" if v.first_divergence is None else f"; first beyond at t = {v.first_divergence:.2f} s"
+    )
+    out.print(
+        f"{escape(str(v.log))} ({v.scene}, {n} commands): {verdict}: POI within "
+        f"{1e3 * v.max_poi_error:.4f} mm (tolerance {1e3 * POI_TOLERANCE:.0f}), fingers within "
+        f"{1e3 * v.max_finger_error:.4f} mm (tolerance {1e3 * FINGER_TOLERANCE:.0f}); other "
+        f"joints within {1e3 * v.max_joint_error:.4f} mrad (not judged){first}",
+        highlight=False,
+    )
+    if v.divergent:
+        raise typer.Exit(1)
+
+
 @app.command()
 def replay(
-    tree: Annotated[Path, typer.Argument(help="Tree file (tree.json).")],
+    tree: Annotated[
+        Path | None, typer.Argument(help="Tree file (tree.json); none with --verify.")
+    ] = None,
     scene: Annotated[
         str | None, typer.Option(help="Scene name or path; default: the tree's.")
     ] = None,
@@ -363,6 +395,14 @@ def replay(
     min_success: Annotated[
         float | None, typer.Option(help="Exit 1 if the campaign's success rate is below this.")
     ] = None,
+    verify: Annotated[
+        Path | None,
+        typer.Option(
+            help="Play a recorded log's commands again from its first state and report how "
+            "far the robot strays from what it recorded (exit 1 beyond the tolerance).",
+            dir_okay=False,
+        ),
+    ] = None,
     force: Annotated[bool, typer.Option(help="Overwrite existing outputs.")] = False,
     odometry_drift: Annotated[
         float,
@@ -376,8 +416,16 @@ def replay(
 ) -> None:
     """Execute the tree autonomously in simulation: one episode or a campaign."""
     from smccli.execute import run_campaign, run_episode
+    from smccli.execute.verify import verify_log
     from smccli.world.sim import OdometryDrift
 
+    if verify is not None:
+        if tree is not None or trials > 0:
+            raise SmcError("--verify LOG replays a recording's commands: give no tree or --trials")
+        _print_verification(verify_log(verify))
+        raise typer.Exit(0)
+    if tree is None:
+        raise SmcError("replay needs a tree file (or --verify LOG)")
     drift = OdometryDrift(odometry_drift, odometry_drift) if odometry_drift > 0 else None
     if cluster is not None and trials <= 0:
         raise SmcError("--cluster runs a campaign's trials: give --trials N")
