@@ -295,6 +295,13 @@ def _print_episode(result: EpisodeResult) -> None:
         f"x{ratio:.2f}); wall {result.wall_time:.2f} s"
         + (f"; log {result.output}" if result.output else "")
     )
+    if result.taught is not None:
+        tt = result.taught
+        out.print(
+            f"taught at {tt.node}: {escape(str(tt.log))} ({tt.marks} marks) compiled into the "
+            f"tree, now version {tt.version}; execution went on from {tt.end}",
+            highlight=False,
+        )
 
 
 def _print_campaign(summary: dict[str, Any]) -> None:
@@ -395,6 +402,18 @@ def replay(
     min_success: Annotated[
         float | None, typer.Option(help="Exit 1 if the campaign's success rate is below this.")
     ] = None,
+    teach: Annotated[
+        str | None,
+        typer.Option(
+            help="Where no SMC is contingent, an operator (script or keyboard) continues from "
+            "there; the continuation is recorded, compiled into the tree from that node, and "
+            "execution goes on."
+        ),
+    ] = None,
+    script: Annotated[
+        Path | None,
+        typer.Option(help="Teleop script of the continuation (--teach script).", dir_okay=False),
+    ] = None,
     verify: Annotated[
         Path | None,
         typer.Option(
@@ -416,6 +435,7 @@ def replay(
 ) -> None:
     """Execute the tree autonomously in simulation: one episode or a campaign."""
     from smccli.execute import run_campaign, run_episode
+    from smccli.execute.teach import TeachConfig
     from smccli.execute.verify import verify_log
     from smccli.world.sim import OdometryDrift
 
@@ -426,6 +446,13 @@ def replay(
         raise typer.Exit(0)
     if tree is None:
         raise SmcError("replay needs a tree file (or --verify LOG)")
+    teach_cfg = None
+    if teach is not None:
+        if trials > 0:
+            raise SmcError("--teach continues one episode; it does not go with --trials")
+        teach_cfg = TeachConfig(tree_path=tree, operator=teach, script=script)
+    elif script is not None:
+        raise SmcError("--script is the continuation of --teach script")
     drift = OdometryDrift(odometry_drift, odometry_drift) if odometry_drift > 0 else None
     if cluster is not None and trials <= 0:
         raise SmcError("--cluster runs a campaign's trials: give --trials N")
@@ -475,6 +502,7 @@ def replay(
         report=report,
         force=force,
         drift=drift,
+        teach=teach_cfg,
     )
     _print_episode(result)
     if result.outcome != "success":

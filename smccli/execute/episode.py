@@ -26,6 +26,8 @@ from smccli.execute.evaluation import HandleWatch, score
 from smccli.execute.executor import ActionTrace, Decision, TreeExecutor
 from smccli.execute.replay_log import ReplayLog
 from smccli.execute.sensing import Sensors
+from smccli.execute.teach import TeachConfig, Teaching, check_teach
+from smccli.execute.teach import teach as run_teaching
 from smccli.learn.tree import Edge, Tree, digest, load_tree
 from smccli.outputs import check_output, write_atomic
 from smccli.world.scene import (
@@ -75,6 +77,8 @@ class EpisodeResult:
     """The replay log written, if any."""
     note: str | None = None
     """Said about the run, e.g. that the scene is not the one the tree was taught in."""
+    taught: Teaching | None = None
+    """What an operator taught where no SMC was contingent (``teach``), if anything."""
 
     @property
     def latencies_ms(self) -> list[float]:
@@ -102,6 +106,16 @@ class EpisodeResult:
             "wall_time_s": self.wall_time,
             "output": None if self.output is None else str(self.output),
             "note": self.note,
+            "taught": None
+            if self.taught is None
+            else {
+                "node": self.taught.node,
+                "log": str(self.taught.log),
+                "tree_version": self.taught.version,
+                "end": self.taught.end,
+                "marks": self.taught.marks,
+                "interrupted": self.taught.interrupted,
+            },
         }
 
 
@@ -205,10 +219,14 @@ def episode(
     force: bool = False,
     evaluate: Callable[[Sim], None] | None = None,
     drift: OdometryDrift | None = None,
+    teach: TeachConfig | None = None,
 ) -> EpisodeResult:
     """Run Algorithm 2 once on ``layout`` and score it. ``evaluate`` runs first thing after
     control (tests use it to re-enable object queries); ``drift``: a mobile base's odometry
-    error (:class:`~smccli.world.sim.OdometryDrift`)."""
+    error (:class:`~smccli.world.sim.OdometryDrift`); ``teach``: where no SMC is
+    contingent, an operator continues from there, the tree file grows from that node and
+    execution goes on from where the taught chain ends (:mod:`smccli.execute.teach`; the
+    replay log holds the autonomous part before it)."""
     wall0 = time.perf_counter()
     sim = Sim(scene, layout, drift=drift)
     log = None
@@ -233,6 +251,15 @@ def episode(
         executor = TreeExecutor(tree, sensors, on_decision=None if log is None else log.on_decision)
         t0 = sim.t
         outcome, reason, decisions, actions, path = executor.run()
+        taught = None
+        if teach is not None and outcome == "no_contingent_smc":
+            if log is not None:
+                log.close()
+                log = None
+            taught = run_teaching(sim, tree, executor.policy.nodes[0], teach, seed)
+            executor = TreeExecutor(load_tree(teach.tree_path), sensors)
+            outcome, reason, more_d, more_a, more_p = executor.run(start=taught.end)
+            decisions, actions, path = decisions + more_d, actions + more_a, path + more_p
         duration = sim.t - t0
         if outcome == "success":
             for _ in range(round(FINAL_SETTLE / sim.control_period)):
@@ -273,6 +300,7 @@ def episode(
         manipulated=verdict.manipulated,
         final_poses=verdict.final_poses,
         output=None if output is None else Path(output),
+        taught=taught,
     )
 
 
@@ -286,8 +314,10 @@ def run_episode(
     report: Path | None = None,
     force: bool = False,
     drift: OdometryDrift | None = None,
+    teach: TeachConfig | None = None,
 ) -> EpisodeResult:
-    """``smc replay TREE``: one episode on the layout file or the seed's layout (trial 0).
+    """``smc replay TREE``: one episode on the layout file or the seed's layout (trial 0);
+    ``teach``: an operator continues where no SMC is contingent (``--teach``).
 
     Raises TreeError/SceneError (exit 2) for a bad tree or scene, OutputError before any
     work when an output cannot be written (or exists without ``force``).
@@ -304,7 +334,9 @@ def run_episode(
         lay = layout
     else:
         lay = load_layout_file(Path(layout), sc)
-    result = episode(t, sc, lay, seed=seed, output=output, force=force, drift=drift)
+    if teach is not None:
+        check_teach(teach)
+    result = episode(t, sc, lay, seed=seed, output=output, force=force, drift=drift, teach=teach)
     result = replace(result, note=scene_note(t, sc))
     if report is not None:
         doc = {

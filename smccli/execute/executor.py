@@ -44,7 +44,7 @@ from smccli.execute.policy import (
     match_edges,
 )
 from smccli.execute.sensing import Sensors
-from smccli.learn.tree import Edge, Tree
+from smccli.learn.tree import ROOT, Edge, Tree
 from smccli.perception import Cluster, scale_reading
 from smccli.perception.scan import align_scans, pose_to_se2, se2_to_pose
 from smccli.world.sensors import CameraFrame, PoiCommand, hand_in_base, hand_in_world
@@ -351,11 +351,13 @@ class TreeExecutor:
             if (el > 0.15 and still >= 10) or el > 3.0:
                 return
 
-    def run(self) -> tuple[str, str, list[Decision], list[ActionTrace], list[Edge]]:
-        """Algorithm 2 from the root to a leaf: (outcome, reason, decisions, actions, path);
-        outcome is one of :data:`CONTROL_OUTCOMES`."""
+    def run(
+        self, start: str = ROOT
+    ) -> tuple[str, str, list[Decision], list[ActionTrace], list[Edge]]:
+        """Algorithm 2 from the root (or ``start``) to a leaf: (outcome, reason, decisions,
+        actions, path); outcome is one of :data:`CONTROL_OUTCOMES`."""
         policy = self.policy
-        policy.reset()
+        policy.reset(start)
         decisions: list[Decision] = []
         actions: list[ActionTrace] = []
         path: list[Edge] = []

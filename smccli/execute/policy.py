@@ -438,9 +438,12 @@ class TreePolicy:
         """A leaf is reached: no node of the frontier has a child."""
         return not any(self.tree.children(n) for n in self._nodes)
 
-    def reset(self) -> None:
-        """Back to the root (a new task)."""
-        self._nodes = (ROOT,)
+    def reset(self, node: str = ROOT) -> None:
+        """Back to the root (a new task), or to ``node`` (where a person just taught the
+        robot to be)."""
+        if node != ROOT and node not in self.tree.nodes:
+            raise SmcError(f"the tree has no node {node!r}")
+        self._nodes = (node,)
         self._scan_alignment = {}
 
     def edge(self, edge_id: str) -> Edge:

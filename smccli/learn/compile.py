@@ -31,7 +31,7 @@ from smccli.learn.smc import (
     goal_in_object,
     pose_in_pose,
 )
-from smccli.learn.tree import FORMAT, Tree, insert_chain, load_tree, save_tree
+from smccli.learn.tree import FORMAT, ROOT, Tree, digest, insert_chain, load_tree, save_tree
 from smccli.logs import Log, read_log
 from smccli.logs.robot import geometry_at, robot_model_of
 from smccli.logs.ros2_bag import TopicMap, read_ros2_bag
@@ -81,6 +81,9 @@ class Chain:
     """One SMC per fragment."""
     warnings: tuple[str, ...]
     """One-line warnings (truncated log, no boundary, no salient object...)."""
+    at: str | None = None
+    """Where the chain was taught during replay (``smc replay --teach``) and inserted; None:
+    a demonstration of the whole task, inserted at the root."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -583,7 +586,21 @@ def compile_logs(
             sources = [
                 Source(log=path.name, sha256=log.sha256, t0=f.t0, t1=f.t1) for f in chain.fragments
             ]
-            tree = insert_chain(tree, chain.smcs, sources)
+            # A continuation taught during replay (smc replay --teach) grows the tree from
+            # the node where no SMC was contingent.
+            taught = log.metadata.get("teach_node")
+            at = taught or ROOT
+            if at not in tree.nodes:
+                raise LogError(
+                    f"{path}: taught at node {at} of tree {log.metadata.get('teach_tree', '?')}; "
+                    f"{out} has no such node"
+                )
+            if at != ROOT and log.metadata.get("teach_tree_digest") != digest(tree):
+                warn(
+                    f"{path}: taught on another version of the tree (digest "
+                    f"{log.metadata.get('teach_tree_digest', '?')[:19]}); inserted at {at}"
+                )
+            tree = insert_chain(tree, chain.smcs, sources, at=at)
             if not tree.scene:
                 tree = replace(
                     tree,
@@ -595,7 +612,7 @@ def compile_logs(
                     },
                     robot=robot,
                 )
-            added.append(chain)
+            added.append(replace(chain, at=taught))
         if not added:
             return CompileResult(tree=tree, added=(), skipped=tuple(skipped), changed=False)
         entry = {
@@ -603,7 +620,13 @@ def compile_logs(
             "time": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
             "smc_version": __version__,
             "logs": [
-                {"name": c.log.name, "sha256": c.sha256, "fragments": len(c.smcs)} for c in added
+                {
+                    "name": c.log.name,
+                    "sha256": c.sha256,
+                    "fragments": len(c.smcs),
+                    **({"at": c.at} if c.at is not None else {}),
+                }
+                for c in added
             ],
         }
         tree = replace(tree, version=tree.version + 1, history=(*tree.history, entry))

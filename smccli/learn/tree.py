@@ -81,11 +81,17 @@ class Tree:
         return {s.sha256 for e in self.edges for s in e.sources}
 
 
-def insert_chain(tree: Tree, chain: Sequence[Smc], sources: Sequence[Source]) -> Tree:
-    """Algorithm 1: insert one demonstration's SMC chain, merging contingent prefixes."""
+def insert_chain(
+    tree: Tree, chain: Sequence[Smc], sources: Sequence[Source], at: str = ROOT
+) -> Tree:
+    """Algorithm 1: insert one demonstration's SMC chain, merging contingent prefixes;
+    from the root, or from node ``at`` (a continuation taught where replay found no
+    contingent SMC)."""
+    if at not in tree.nodes:
+        raise TreeError(f"the tree has no node {at!r} to insert at")
     nodes = list(tree.nodes)
     edges = list(tree.edges)
-    node = ROOT
+    node = at
     for j, (smc, src) in enumerate(zip(chain, sources, strict=True)):
         candidates = [e for e in edges if e.parent == node and c_f(smc, e.smc, tree.params)]
         if not candidates:

@@ -151,24 +151,7 @@ def record(
     wall0 = time.perf_counter()
     marks = 0
     try:
-        writer = LogWriter(
-            out,
-            metadata=_metadata(scene, cfg, extra),
-            attachments=scene_attachments(scene),
-            force=cfg.force,
-            wall_clock_flush=not cfg.reproducible,
-        )
-        try:
-            with _stop_requests() as stop:
-                marks = _session(writer, sim, operator, cfg, stop, on_status)
-        except ScriptError:
-            writer.abort()  # the script's fault (or the operator's discard): re-record it
-            raise
-        except BaseException as exc:
-            writer.close(interrupted=f"error: {exc.__class__.__name__}")
-            raise
-        interrupted = stop[0] if stop else None
-        writer.close(interrupted=interrupted)
+        marks, interrupted = record_session(sim, operator, cfg, out, extra, on_status)
     finally:
         # The sensor renderer's GL context first, then the viewer: the viewer's thread
         # tears GLFW down, and a context freed after that crashes the process.
@@ -185,6 +168,39 @@ def record(
         size_bytes=out.stat().st_size,
         interrupted=interrupted,
     )
+
+
+def record_session(
+    sim: Sim,
+    operator: ScriptOperator | KeyboardOperator,
+    cfg: RecordConfig,
+    out: Path,
+    extra: dict[str, str],
+    on_status: Callable[[RecordStatus], None] | None = None,
+) -> tuple[int, str | None]:
+    """Record ``operator`` driving ``sim`` from the state it is in into ``out`` (checked by
+    the caller); ``extra`` metadata beside the recorder's. Returns (marks written, why the
+    recording was interrupted or None). A script's error or the operator's discard
+    removes the log; any other failure keeps what was recorded."""
+    writer = LogWriter(
+        out,
+        metadata=_metadata(sim.scene, cfg, extra),
+        attachments=scene_attachments(sim.scene),
+        force=cfg.force,
+        wall_clock_flush=not cfg.reproducible,
+    )
+    try:
+        with _stop_requests() as stop:
+            marks = _session(writer, sim, operator, cfg, stop, on_status)
+    except ScriptError:
+        writer.abort()  # the script's fault (or the operator's discard): re-record it
+        raise
+    except BaseException as exc:
+        writer.close(interrupted=f"error: {exc.__class__.__name__}")
+        raise
+    interrupted = stop[0] if stop else None
+    writer.close(interrupted=interrupted)
+    return marks, interrupted
 
 
 def _session(
