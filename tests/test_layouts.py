@@ -21,7 +21,7 @@ from smccli.record.session import RecordConfig, record
 pytestmark = pytest.mark.slow
 
 
-N_BENCH = 7
+N_BENCH = 6
 """bench_pick demonstrations, each from its own random layout (the README's compile figure
 has 100; 8 keep `make test` within its budget and still span the white box's ranges)."""
 N_PAIRS = 6

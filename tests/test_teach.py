@@ -75,7 +75,7 @@ def test_taught_branch_grows_from_the_stop_and_the_tree_then_needs_no_teacher(
     assert [e.parent for e in new] == [ROOT, new[0].child] and all(e.support == 1 for e in new)
 
     # Both variants, no teacher: each trial is deterministic, so every one must succeed.
-    summary = run_campaign(cube_tree, trials=24, seed=2, workers=2)
+    summary = run_campaign(cube_tree, trials=16, seed=2, workers=2)
     variants = {k for r in summary["trial_results"] for k in r["layout"]}
     assert {"orange_cube", "grey_pyramid"} <= variants
     assert summary["success_rate"] >= 0.99, summary["failures"]
