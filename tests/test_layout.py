@@ -16,7 +16,8 @@ ALLOWED = {
     "perception": {"world"},
     "learn": {"world", "logs", "perception"},
     "record": {"world", "logs", "perception"},
-    "execute": {"world", "logs", "perception", "learn"},
+    # Teaching during replay records the operator (execute/teach.py, docs/layout.md).
+    "execute": {"world", "logs", "perception", "learn", "record"},
     "inspect": {"world", "logs", "perception", "learn"},
     "bench": {"world", "logs", "perception", "learn", "record", "execute", "inspect"},
 }
