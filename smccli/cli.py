@@ -120,10 +120,17 @@ def record(
         bool, typer.Option(help="Start from a random layout (else nominal).")
     ] = False,
     realtime: Annotated[bool, typer.Option(help="Pace the script operator at real time.")] = False,
+    episodes: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            help="Demonstrations in one session: NAME-000.mcap, NAME-001.mcap, ... (keyboard: "
+            "Enter keeps one and goes on, X records it again, Esc ends the session).",
+        ),
+    ] = 1,
 ) -> None:
-    """Record a demonstration into an MCAP log."""
-    from smccli.record.session import RecordConfig
-    from smccli.record.session import record as run_record
+    """Record a demonstration (or a session of them) into MCAP logs."""
+    from smccli.record.session import RecordConfig, record_episodes
 
     cfg = RecordConfig(
         scene=scene,
@@ -134,6 +141,7 @@ def record(
         force=force,
         randomize=randomize,
         realtime=realtime,
+        episodes=episodes,
     )
     with Progress(
         TextColumn("[bold]recording[/]"),
@@ -157,10 +165,12 @@ def record(
                 err.print(f"recording: {text}", highlight=False, soft_wrap=True)
                 next_line[0] += 1.0
 
-        summary = run_record(
+        summaries = record_episodes(
             cfg, on_status=status, on_message=lambda m: progress.console.print(escape(m))
         )
-    _print_summary(summary)
+    for summary in summaries:
+        _print_summary(summary)
+    summary = summaries[-1]
     if summary.interrupted:
         err.print(
             f"interrupted ({summary.interrupted}): kept {escape(str(summary.path))} with "

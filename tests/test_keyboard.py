@@ -168,7 +168,7 @@ class Stderr:
         return "".join(self.seen)
 
 
-def _record(tmp_path, display, scene: str = "pick_place"):
+def _record(tmp_path, display, scene: str = "pick_place", extra: tuple[str, ...] = ()):
     out = tmp_path / "kb.mcap"
     env = {**os.environ, "DISPLAY": display, "MUJOCO_GL": "glfw"}
     proc = subprocess.Popen(
@@ -183,6 +183,7 @@ def _record(tmp_path, display, scene: str = "pick_place"):
             "keyboard",
             "-o",
             str(out),
+            *extra,
         ],
         env=env,
         stdout=subprocess.PIPE,
@@ -193,9 +194,9 @@ def _record(tmp_path, display, scene: str = "pick_place"):
 
 
 @contextmanager
-def _recording(tmp_path, display, scene: str = "pick_place"):
+def _recording(tmp_path, display, scene: str = "pick_place", extra: tuple[str, ...] = ()):
     """A keyboard recording whose viewer is up and has the focus: (out, env, window, stderr)."""
-    out, env, proc = _record(tmp_path, display, scene)
+    out, env, proc = _record(tmp_path, display, scene, extra)
     err = Stderr(proc)
     try:
         err.wait_for("keyboard operator ready")
@@ -222,21 +223,121 @@ def _drive(
         return err.proc.returncode, err.rest(), out
 
 
-@pytest.mark.viewer
-def test_keys_move_the_target_toggle_the_gripper_and_mark(tmp_path, display):
-    code, stderr, out = _drive(
-        tmp_path, display, ("Up",) * 5 + ("Page_Down",) * 3 + ("q", "g"), ("m", "Return")
+MAGENTA = ((180, 256), (0, 90), (150, 256))
+"""The target marker's colour on screen (and what no camera frame may show): R, G, B ranges."""
+
+
+def _magenta(rgb: np.ndarray) -> np.ndarray:
+    rgb = rgb.astype(int)
+    return np.logical_and.reduce(
+        [(lo <= rgb[..., i]) & (rgb[..., i] < hi) for i, (lo, hi) in enumerate(MAGENTA)]
     )
+
+
+def _screenshot(display: str) -> np.ndarray:
+    """The whole X screen, (H, W, 3) uint8 (Pillow reads it through XCB)."""
+    from PIL import ImageGrab
+
+    return np.asarray(ImageGrab.grab(xdisplay=display).convert("RGB"))
+
+
+def _window_box(env: dict, window: str) -> tuple[int, int, int, int]:
+    """(x, y, width, height) of the window on the screen [px]."""
+    out = subprocess.run(
+        ["xdotool", "getwindowgeometry", "--shell", window],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    g = dict(line.split("=", 1) for line in out.split())
+    return int(g["X"]), int(g["Y"]), int(g["WIDTH"]), int(g["HEIGHT"])
+
+
+def _drag_marker(env: dict, display: str, dx: int, dy: int) -> None:
+    """Find the magenta target marker on screen, select it (double-click) and move it by
+    (dx, dy) pixels with Ctrl + right drag, in small steps as a hand would."""
+    ys, xs = np.nonzero(_magenta(_screenshot(display)))
+    assert len(xs) > 20, "the target marker is not on screen"
+    x, y = int(np.median(xs)), int(np.median(ys))
+
+    def xdo(*args: object) -> None:
+        subprocess.run(["xdotool", *map(str, args)], env=env, check=True)
+
+    xdo("mousemove", x, y)
+    xdo("click", "--repeat", 2, "--delay", 80, 1)
+    time.sleep(0.5)
+    xdo("keydown", "ctrl")
+    xdo("mousedown", 3)
+    steps = 30
+    for i in range(1, steps + 1):
+        xdo("mousemove", x + dx * i // steps, y + dy * i // steps)
+        time.sleep(0.03)
+    xdo("mouseup", 3)
+    xdo("keyup", "ctrl")
+
+
+@pytest.mark.viewer
+def test_a_session_drags_the_marker_steps_keys_and_records_two_episodes(tmp_path, display):
+    """``smc record --operator keyboard --episodes 2``. Episode 1: the magenta target
+    marker is dragged with the mouse, then Up, G, M and Enter (keep, next). Episode 2: X
+    (discard: recorded again), then the keys alone, Enter. Two logs; the HUD's screenshot
+    is kept (``SMC_HUD_PNG``: where to copy it, for the README)."""
+    with _recording(tmp_path, display, extra=("--episodes", "2")) as (out, env, win, err):
+        err.wait_sim(1.0)
+        _drag_marker(env, display, dx=-90, dy=60)
+        err.wait_sim(2.0)  # the arm follows the dragged target
+        _keys(env, win, "Up", "g")
+        time.sleep(1.0)  # the HUD shows the closed gripper
+        x, y, w, h = _window_box(env, win)
+        shot = _screenshot(display)[y : y + h, x : x + w]
+        from PIL import Image
+
+        Image.fromarray(shot).save(tmp_path / "hud.png")
+        if os.environ.get("SMC_HUD_PNG"):
+            shutil.copy(tmp_path / "hud.png", os.environ["SMC_HUD_PNG"])
+        err.wait_sim(1.0)
+        _keys(env, win, "m", "Return")
+        err.wait_for("episode 1/2 kept")
+        _keys(env, win, "x")
+        err.wait_for("episode 2/2 discarded")
+        err.wait_sim(1.0)
+        _keys(env, win, *("Up",) * 5 + ("Page_Down",) * 3 + ("q", "g"))
+        err.wait_sim(2.0)  # the gripper closes
+        _keys(env, win, "m", "Return")
+        err.proc.wait(timeout=60)
+        code, stderr = err.proc.returncode, err.rest()
     assert code == 0, stderr
-    log = read_log(out)
-    first, last = log.commands[0], log.commands[-1]
+    assert "episode 2/2 kept" in stderr and "session ended" in stderr
+    assert sorted(p.name for p in tmp_path.glob("kb*")) == ["kb-000.mcap", "kb-001.mcap"]
+    first_ep, second_ep = read_log(tmp_path / "kb-000.mcap"), read_log(tmp_path / "kb-001.mcap")
+    assert first_ep.metadata["episode"] == "1/2" and second_ep.metadata["episode"] == "2/2"
+
+    # Episode 1: the drag moved the target in many small steps, by far more than any key
+    # would, yaw untouched (Ctrl + right drag translates); then Up added exactly 1 cm in x.
+    target = np.array([c.target for c in first_ep.commands])
+    step = np.diff(target, axis=0)
+    moves = np.flatnonzero(np.abs(step).max(axis=1) > 1e-9)
+    up = [i for i in moves if np.allclose(step[i], [0.01, 0, 0, 0], atol=1e-12)]
+    assert len(up) == 1 and up[0] == moves[-1], "one Up press, after the drag"
+    dragged = target[up[0]] - target[0]
+    assert len(moves) > 5 and np.linalg.norm(dragged[:3]) > 0.05, dragged
+    assert np.abs(target[:, 3] - target[0, 3]).max() < 1e-9
+    assert first_ep.commands[-1].gripper == 0.0 and len(first_ep.marks) == 1
+    # The arm followed the dragged target.
+    assert np.linalg.norm(np.asarray(first_ep.poi[-1])[:3] - target[-1, :3]) < 0.01
+    # The marker is the viewer's: no camera frame shows it.
+    assert not any(_magenta(f.rgb).any() for f in first_ep.frames)
+
+    # Episode 2 started from home again; the keys step the target exactly.
+    first, last = second_ep.commands[0], second_ep.commands[-1]
+    np.testing.assert_allclose(first.target, target[0], atol=1e-6)
     np.testing.assert_allclose(last.target[:3] - first.target[:3], [0.05, 0.0, -0.03], atol=1e-6)
     assert last.target[3] - first.target[3] == pytest.approx(np.radians(5))
     assert first.gripper == 1.0 and last.gripper == 0.0
-    assert [m.source for m in log.marks] == ["operator"]
-    # The robot followed: the POI moved forward and down with the target.
-    assert log.poi[-1][0] - log.poi[0][0] > 0.04
-    assert {"/camera/color", "/camera/depth", "/robot/joint_states"} <= set(log.topic_counts)
+    assert [m.source for m in second_ep.marks] == ["operator"]
+    assert second_ep.poi[-1][0] - second_ep.poi[0][0] > 0.04
+    assert {"/camera/color", "/camera/depth", "/robot/joint_states"} <= set(second_ep.topic_counts)
 
 
 @pytest.mark.viewer

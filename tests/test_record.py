@@ -6,8 +6,10 @@ import re
 import signal
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 from conftest import SAMPLE_LOGS, sha256, smc
 from mcap.reader import make_reader
@@ -15,7 +17,7 @@ from mcap.reader import make_reader
 from smccli.errors import OutputExistsError
 from smccli.learn.compile import compile_logs
 from smccli.logs import read_log
-from smccli.record.session import RecordConfig, record
+from smccli.record.session import RecordConfig, record, record_episodes
 
 SCRIPT = SAMPLE_LOGS / "pick_place" / "demo1.yaml"
 PROTO = {
@@ -105,6 +107,37 @@ def test_same_script_and_seed_give_the_same_bytes(tmp_path):
         )
         digests.append(sha256(tmp_path / name))
     assert digests[0] == digests[1]
+
+
+def _messages(path: Path) -> list[tuple[str, int, bytes]]:
+    with path.open("rb") as f:
+        return [(c.topic, m.log_time, m.data) for _, c, m in make_reader(f).iter_messages()]
+
+
+def test_a_session_records_episodes_each_as_its_seed_alone(tmp_path):
+    """``--episodes 2 --randomize --seed 3``: demo-000 is what ``--seed 3`` records alone,
+    demo-001 starts from another layout (seed 4); one simulation serves both."""
+    cfg = RecordConfig(
+        scene="bench_pick",
+        script=SAMPLE_LOGS / "bench_pick" / "demo.yaml",
+        seed=3,
+        randomize=True,
+        reproducible=True,
+    )
+    alone = record(replace(cfg, output=tmp_path / "alone.mcap"))
+    (tmp_path / "s-001.mcap").write_bytes(b"keep me")
+    with pytest.raises(OutputExistsError, match="s-001.mcap"):
+        record_episodes(replace(cfg, output=tmp_path / "s.mcap", episodes=2))
+    assert not (tmp_path / "s-000.mcap").exists()  # refused before the first episode
+    assert (tmp_path / "s-001.mcap").read_bytes() == b"keep me"
+    (tmp_path / "s-001.mcap").unlink()
+    kept = record_episodes(replace(cfg, output=tmp_path / "s.mcap", episodes=2))
+    assert [s.path.name for s in kept] == ["s-000.mcap", "s-001.mcap"]
+    assert _messages(kept[0].path) == _messages(alone.path)
+    meta = [read_log(s.path).metadata for s in kept]
+    assert [m["seed"] for m in meta] == ["3", "4"] and meta[1]["episode"] == "2/2"
+    first = [read_log(s.path).ground_truth[0][1] for s in kept]
+    assert not np.allclose(first[0]["white_box"], first[1]["white_box"])
 
 
 def test_existing_output_is_refused(recorded):

@@ -81,27 +81,39 @@ from typing import Any
 import numpy as np
 
 from smccli.errors import SmcError
+from smccli.record.hud import (
+    HudState,
+    draw_scene,
+    from_world,
+    marker_pose,
+    place_marker,
+    texts,
+)
 from smccli.record.operators import OperatorOutput
 from smccli.world.controller import wrap
 from smccli.world.sensors import PoiCommand, SaliencyMark
-from smccli.world.sim import Sim
+from smccli.world.sim import MARKER_GROUP, Sim
 
 # GLFW key codes (the viewer passes them to key_callback).
 KEY_RIGHT, KEY_LEFT, KEY_DOWN, KEY_UP = 262, 263, 264, 265
 KEY_PAGE_UP, KEY_PAGE_DOWN, KEY_ENTER = 266, 267, 257
 KEY_LEFT_SHIFT, KEY_RIGHT_SHIFT = 340, 344
+KEY_ESCAPE = 256
 HELP = (
     "keyboard operator ready: arrows x/y, PgUp/PgDn z, Q/E yaw, G gripper, M mark, "
-    "Enter finish, X discard"
+    "Enter finish, X discard, Esc finish and end the session; double-click the magenta "
+    "marker, then Ctrl+right drag moves it (Ctrl+left drag turns it)"
 )
 BASE_HELP = (
     "keyboard operator ready (mobile base, hold keys to drive): Up/Down forward/back, "
-    "Left/Right strafe, Q/E turn, Shift half speed, M mark, Enter finish, X discard"
+    "Left/Right strafe, Q/E turn, Shift half speed, M mark, Enter finish, X discard, "
+    "Esc finish and end the session"
 )
 MM_HELP = (
     "keyboard operator ready (mobile manipulator, Tab switches base/arm, shown top left): "
     "base: hold Up/Down/Left/Right/Q/E to drive, Shift half speed; arm (in the base's "
-    "frame): arrows x/y, PgUp/PgDn z, Q/E yaw, G gripper; M mark, Enter finish, X discard"
+    "frame): arrows x/y, PgUp/PgDn z, Q/E yaw, G gripper, or drag the magenta marker; "
+    "M mark, Enter finish, X discard, Esc finish and end the session"
 )
 KEY_TAB = 258
 """Switches a mobile manipulator between driving its base and moving its hand."""
@@ -120,8 +132,9 @@ BINDINGS = {
     ord("M"): ("mark", None),
     KEY_ENTER: ("finish", None),
     ord("X"): ("discard", None),
+    KEY_ESCAPE: ("stop", None),
 }
-EVENTS = {ord("M"): "mark", KEY_ENTER: "finish", ord("X"): "discard"}
+EVENTS = {ord("M"): "mark", KEY_ENTER: "finish", ord("X"): "discard", KEY_ESCAPE: "stop"}
 """Keys the base mode acts on per press; the drive keys below act while held."""
 
 BASE_SPEED = 0.4
@@ -224,7 +237,8 @@ class BaseDriver:
 
 def key_action(key: int, base: bool) -> tuple[str | None, np.ndarray | None]:
     """What a press does: ``(kind, delta)``, kind one of move, gripper, mark, finish,
-    discard or None. A base's drive keys act while held (:func:`twist`), not per press."""
+    discard, stop (finish and end the session) or None. A base's drive keys act while
+    held (:func:`twist`), not per press."""
     if base:
         return EVENTS.get(key), None
     return BINDINGS.get(key, (None, None))
@@ -255,6 +269,13 @@ class KeyboardOperator:
         self._on_ready = on_ready
         self.discarded = False
         """True once the operator pressed X: the recording is thrown away."""
+        self.stopped = False
+        """True once the operator pressed Esc: keep this recording, record no more."""
+        self.marks = 0
+        """Saliency marks so far in this episode (shown in the HUD)."""
+        self.episode: tuple[int, int] | None = None
+        """(this episode, episodes in the session), 1-based, shown in the HUD."""
+        self._placed: tuple[np.ndarray, np.ndarray] | None = None  # the marker's last pose
         self.mobile_manipulator = sim.mobile_manipulator
         """Base and arm: Tab switches what the keys move (:attr:`mode`)."""
         self.mode = "base" if self.mobile_manipulator else None
@@ -290,6 +311,7 @@ class KeyboardOperator:
         # MuJoCo's viewer shows geom groups 0-2; the robot's own geoms sit in their group.
         with self.viewer.lock():
             self.viewer.opt.geomgroup[sim.robot.geom_group] = 1
+            self.viewer.opt.geomgroup[MARKER_GROUP] = 1
             # Visualisation flags the viewer toggles on letters this operator uses (and, for
             # a base, on A and D: W/A/S/D come to hand, and D would hide the walls).
             keys = (*DRIVE, *EVENTS, ord("A"), ord("D"), *BINDINGS) if self.base else BINDINGS
@@ -321,24 +343,53 @@ class KeyboardOperator:
         """The keys drive the base this tick (held keys), else they step the arm."""
         return self.base and self.mode != "arm"
 
-    def _show_mode(self) -> None:
-        """The mode, top left of the viewer (a mobile manipulator's)."""
-        import mujoco
+    def _show(self) -> None:
+        """Marker, user-scene drawings and text overlays for this tick (record/hud.py)."""
+        state = HudState(
+            mode="base" if self.driving else "arm",
+            t=self.sim.t,
+            gripper_open=self.gripper > 0.5,
+            marks=self.marks,
+            target=self.target,
+            poi=self.sim.poi(),
+            episode=self.episode,
+            tab=self.mobile_manipulator,
+        )
+        place_marker(self.sim, self.target)
+        self._placed = marker_pose(self.sim)
+        with self.viewer.lock():
+            if self.viewer.user_scn is not None:
+                draw_scene(self.viewer.user_scn, self.sim, state)
+        self.viewer.set_texts(texts(state))
 
-        text = (
-            ("BASE", "hold arrows, Q/E to drive; Tab: arm")
-            if self.mode == "base"
-            else ("ARM", "arrows x/y, PgUp/PgDn z, Q/E yaw, G grip; Tab: base")
-        )
-        grip = "open" if self.gripper > 0.5 else "closed"
-        self.viewer.set_texts(
-            (
-                mujoco.mjtFontScale.mjFONTSCALE_150,
-                mujoco.mjtGridPos.mjGRID_TOPLEFT,
-                "mode\ngripper",
-                f"{text[0]} ({text[1]})\n{grip}",
-            )
-        )
+    def _dragged(self) -> None:
+        """Take the marker's pose as the target if the person moved it since the last tick
+        (the viewer writes a dragged mocap body's pose on sync). Compared with the pose it
+        was given, not recomputed: a mobile manipulator's base moves the frame between
+        ticks."""
+        pose = marker_pose(self.sim)
+        if pose is None or self._placed is None or self.driving:
+            return
+        if max(np.abs(a - b).max() for a, b in zip(pose, self._placed, strict=True)) > 1e-9:
+            self.target = from_world(self.sim, pose[0], pose[1], keep_z=float(self.target[2]))
+
+    def reset(self, episode: tuple[int, int] | None = None) -> None:
+        """Start a new episode on the simulation as it now is (``Sim.reset`` done)."""
+        while not self.keys.empty():
+            self.keys.get_nowait()
+        self.target = self.sim.poi().copy()
+        self.gripper = 1.0
+        self.discarded = self.stopped = False
+        self.marks = 0
+        self.episode = episode
+        self.mode = "base" if self.mobile_manipulator else None
+        self.base_target = self._base_pose() if self.mobile_manipulator else None
+        if self.driver is not None:
+            start = self.base_target if self.base_target is not None else self.target
+            self.driver = BaseDriver(start, self.sim.control_period)
+        self._pressed_at.clear()
+        self._t0_wall = None
+        self._placed = None
 
     def _on_key(self, key: int) -> None:
         """The viewer's key callback (its thread): queue the press; note the window."""
@@ -374,6 +425,7 @@ class KeyboardOperator:
         marks: list[SaliencyMark] = []
         done = discard = False
         pressed: set[int] = set()
+        self._dragged()
         while True:
             try:
                 key = self.keys.get_nowait()
@@ -391,10 +443,13 @@ class KeyboardOperator:
                 self.gripper = 0.0 if self.gripper > 0.5 else 1.0
             elif kind == "mark":
                 marks.append(SaliencyMark(t=self.sim.t, source="operator", label="keyboard"))
+                self.marks += 1
             elif kind == "finish":
                 done = True
             elif kind == "discard":
                 done = discard = True
+            elif kind == "stop":
+                done = self.stopped = True
         if self.driver is not None and self.mobile_manipulator:
             held = self._held(pressed) if self.driving else set()
             self.base_target = self.driver.update(held, self._base_pose())
@@ -413,9 +468,11 @@ class KeyboardOperator:
         with self.viewer.lock():
             for i, v in self._flags.items():
                 self.viewer.opt.flags[i] = v
-        if self.mobile_manipulator:
-            self._show_mode()
+        self._show()
         self.viewer.sync()
+        # Only the marker may be dragged: a Ctrl-drag on any other body pushes it, which no
+        # command in the log would explain (``smc replay --verify`` would flag the log).
+        self.sim.data.xfrc_applied[:] = 0.0
         if self._on_ready is not None:
             # The viewer has drawn and is reading keys: tell the person (and tests).
             self._on_ready(MM_HELP if self.mobile_manipulator else BASE_HELP if self.base else HELP)
@@ -424,6 +481,11 @@ class KeyboardOperator:
         cmd = PoiCommand(t=self.sim.t, target=self.target.copy(), gripper=self.gripper, base=base)
         self.discarded = self.discarded or discard
         return OperatorOutput(command=cmd, marks=tuple(marks), done=done)
+
+    @property
+    def window_open(self) -> bool:
+        """The viewer's window is still open (the person has not closed it)."""
+        return bool(self.viewer.is_running())
 
     def close(self) -> None:
         """Close the viewer window and wait for its thread to finish.

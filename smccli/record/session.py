@@ -15,7 +15,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -24,7 +24,7 @@ from smccli.errors import ScriptError
 from smccli.logs import LogWriter, log_summary
 from smccli.logs.writer import scene_attachments
 from smccli.outputs import check_output
-from smccli.world.scene import Scene, load_scene, nominal_layout, sample_layout
+from smccli.world.scene import Layout, Scene, load_scene, nominal_layout, sample_layout
 from smccli.world.sim import Sim
 
 if TYPE_CHECKING:
@@ -60,6 +60,8 @@ class RecordConfig:
     reproducible: bool = False
     """Cut chunks on simulation time only, so the same script and seed give a byte-identical
     file (sample logs); otherwise also every wall-clock second, for crash safety."""
+    episodes: int = 1
+    """Demonstrations in the session (:func:`record_episodes`)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,6 +114,15 @@ def _metadata(scene: Scene, cfg: RecordConfig, extra: dict[str, str]) -> dict[st
     }
 
 
+def episode_paths(output: Path, episodes: int) -> list[Path]:
+    """The logs of a session: ``output`` itself for one episode, else ``NAME-000.mcap``,
+    ``NAME-001.mcap``, ... beside it."""
+    if episodes == 1:
+        return [Path(output)]
+    output = Path(output)
+    return [output.with_name(f"{output.stem}-{i:03d}{output.suffix}") for i in range(episodes)]
+
+
 def record(
     cfg: RecordConfig,
     on_status: Callable[[RecordStatus], None] | None = None,
@@ -124,45 +135,119 @@ def record(
     Only the operator's explicit discard, or an error in a teleop script (which re-records
     the same demonstration), removes the log; any other failure keeps what was recorded.
     """
-    out = check_output(cfg.output, force=cfg.force)
+    return record_episodes(replace(cfg, episodes=1), on_status, on_message)[0]
+
+
+def record_episodes(
+    cfg: RecordConfig,
+    on_status: Callable[[RecordStatus], None] | None = None,
+    on_message: Callable[[str], None] | None = None,
+) -> list[RecordSummary]:
+    """Record ``cfg.episodes`` demonstrations in one session (:func:`episode_paths`), one
+    simulation and one viewer throughout; returns the summaries of the logs kept.
+
+    Episode ``i`` uses seed ``cfg.seed + i`` for the operator's noise and (``randomize``)
+    its layout, so it is the demonstration ``smc record --seed SEED+i`` would record alone;
+    else every episode starts from the nominal layout. A person ends an episode with Enter
+    (keep it, go on), X (discard it: the same episode is recorded again from the same
+    layout) or Esc (keep it and end the session); closing the viewer, SIGINT or SIGTERM
+    keep the episode and end the session. ``on_message`` gets a status line between
+    episodes. Every log's path is checked before the first episode starts.
+    """
+    if cfg.episodes < 1:
+        raise ScriptError(f"--episodes must be at least 1, found {cfg.episodes}")
+    outs = [check_output(p, force=cfg.force) for p in episode_paths(cfg.output, cfg.episodes)]
     scene = load_scene(cfg.scene)
     extra: dict[str, str] = {}
+    script = None
     if cfg.operator == "script":
         from smccli.record.operators import ScriptOperator, load_script, script_layout
 
         if cfg.script is None:
             raise ScriptError("--operator script needs --script FILE")
         script = load_script(cfg.script)
-        layout = script_layout(scene, script, _rng(cfg.seed) if cfg.randomize else None)
-        sim = Sim(scene, layout)
-        operator: ScriptOperator | KeyboardOperator = ScriptOperator(script, sim, seed=cfg.seed)
         extra["script"] = Path(cfg.script).name
-    elif cfg.operator == "keyboard":
-        from smccli.record.keyboard import KeyboardOperator
 
+        def layout_of(seed: int) -> Layout:
+            return script_layout(scene, script, _rng(seed) if cfg.randomize else None)
+
+    elif cfg.operator == "keyboard":
         first = scene.variants[0][0] if scene.variants else None
-        layout = (
-            sample_layout(scene, _rng(cfg.seed)) if cfg.randomize else nominal_layout(scene, first)
-        )
-        sim = Sim(scene, layout)
-        operator = KeyboardOperator(sim, on_ready=on_message)
+
+        def layout_of(seed: int) -> Layout:
+            if cfg.randomize:
+                return sample_layout(scene, _rng(seed))
+            return nominal_layout(scene, first)
+
     else:
         raise ScriptError(f"unknown operator {cfg.operator!r} (valid: script, keyboard)")
-    wall0 = time.perf_counter()
-    marks = 0
+    say = on_message or (lambda msg: None)
+    sim = Sim(scene, layout_of(cfg.seed), target_marker=cfg.operator == "keyboard")
+    keyboard: KeyboardOperator | None = None
+    summaries: list[RecordSummary] = []
     try:
-        marks, interrupted = record_session(sim, operator, cfg, out, extra, on_status)
+        if cfg.operator == "keyboard":
+            from smccli.record.keyboard import KeyboardOperator
+
+            keyboard = KeyboardOperator(sim, on_ready=say)
+        i = 0
+        while i < cfg.episodes:
+            seed = cfg.seed + i
+            sim.reset(layout_of(seed))
+            if keyboard is not None:
+                keyboard.reset((i + 1, cfg.episodes) if cfg.episodes > 1 else None)
+                operator: ScriptOperator | KeyboardOperator = keyboard
+            else:
+                assert script is not None
+                operator = ScriptOperator(script, sim, seed=seed)
+            ep = replace(cfg, seed=seed)
+            ep_extra = {
+                **extra,
+                **({"episode": f"{i + 1}/{cfg.episodes}"} if cfg.episodes > 1 else {}),
+            }
+            wall0 = time.perf_counter()
+            try:
+                marks, interrupted = record_session(sim, operator, ep, outs[i], ep_extra, on_status)
+            except ScriptError:
+                if keyboard is None or not keyboard.discarded:
+                    raise
+                if cfg.episodes == 1:
+                    raise
+                say(f"episode {i + 1}/{cfg.episodes} discarded; recording it again")
+                continue
+            summaries.append(
+                _summary(outs[i], sim.t, time.perf_counter() - wall0, marks, interrupted)
+            )
+            last = i + 1 == cfg.episodes
+            ended = interrupted is not None or (
+                keyboard is not None and (keyboard.stopped or not keyboard.window_open)
+            )
+            if cfg.episodes > 1:
+                left = "session ended" if ended or last else f"next: episode {i + 2}/{cfg.episodes}"
+                say(
+                    f"episode {i + 1}/{cfg.episodes} kept: {outs[i]} ({sim.t:.1f} s, "
+                    f"{marks} mark(s)); {left}"
+                )
+            if ended:
+                break
+            i += 1
     finally:
         # The sensor renderer's GL context first, then the viewer: the viewer's thread
         # tears GLFW down, and a context freed after that crashes the process.
         sim.close()
-        if hasattr(operator, "close"):
-            operator.close()
+        if keyboard is not None:
+            keyboard.close()
+    return summaries
+
+
+def _summary(
+    out: Path, duration: float, wall: float, marks: int, interrupted: str | None
+) -> RecordSummary:
     summary = log_summary(out)
     return RecordSummary(
         path=out,
-        duration=sim.t,
-        wall_time=time.perf_counter() - wall0,
+        duration=duration,
+        wall_time=wall,
         fragments=marks,
         topics={k: (int(v["count"]), float(v["rate_hz"])) for k, v in summary["topics"].items()},
         size_bytes=out.stat().st_size,

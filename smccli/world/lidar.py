@@ -45,7 +45,8 @@ class LidarReading:
 
 
 class Lidar:
-    """Casts the beams of one lidar site; ``ignore_group`` is the robot's own geom group."""
+    """Casts the beams of one lidar site; ``ignore_group``: the geom groups it does not see
+    (the robot's own, the teleop marker's)."""
 
     def __init__(
         self,
@@ -54,7 +55,7 @@ class Lidar:
         *,
         beams: int = 360,
         range_max: float = RANGE_MAX,
-        ignore_group: int | None = None,
+        ignore_group: int | tuple[int, ...] | None = None,
     ) -> None:
         self.model = model
         self.site_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, site)
@@ -70,7 +71,7 @@ class Lidar:
         self._local = np.stack([np.cos(angles), np.sin(angles), np.zeros(beams)], axis=1)
         self._groups = np.ones(N_GROUPS, dtype=np.uint8)
         if ignore_group is not None:
-            self._groups[ignore_group] = 0
+            self._groups[list(np.atleast_1d(ignore_group))] = 0
         self._geomid = np.zeros(beams, dtype=np.int32)
         self._dist = np.zeros(beams, dtype=np.float64)
 

@@ -21,6 +21,12 @@ from smccli.world.robot_model import RobotModel
 from smccli.world.scene import ROBOT_KEY, Condition, Layout, ObjectSpec, Scene, nominal_layout
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
 
+MARKER_BODY = "smc_target"
+"""The teleop target marker's body (``Sim(target_marker=True)``)."""
+MARKER_GROUP = 5
+"""Its geom group: the viewer shows it, the robot's sensors do not."""
+MARKER_RADIUS = 0.025
+"""Its sphere's radius [m]: big enough to pick with the mouse."""
 CONTROL_PERIOD = 0.01
 """Control period [s] (100 Hz); the physics timestep comes from the model (2 ms)."""
 GRAVITY = 9.81
@@ -94,10 +100,19 @@ class Sim:
         layout: Layout | None = None,
         base_pose: np.ndarray | None = None,
         drift: OdometryDrift | None = None,
+        *,
+        target_marker: bool = False,
     ) -> None:
         self.scene = scene
         self.drift = drift
-        self.model = scene.model()
+        self.model = scene.model() if not target_marker else _with_target_marker(scene)
+        self.marker_id = (
+            mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, MARKER_BODY)
+            if target_marker
+            else -1
+        )
+        """The teleop target marker's body (a mocap body the person drags in the viewer),
+        or -1: see :func:`_with_target_marker`."""
         self.data = mujoco.MjData(self.model)
         m = self.model
         self.control_period = CONTROL_PERIOD
@@ -139,7 +154,8 @@ class Sim:
         self._lidar_site = -1
         for s in robot.sensors:
             if s.type == "lidar":
-                self._lidar = Lidar(m, s.target, ignore_group=robot.geom_group)
+                ignore = (robot.geom_group, MARKER_GROUP) if target_marker else robot.geom_group
+                self._lidar = Lidar(m, s.target, ignore_group=ignore)
                 self._lidar_site = self._id(mujoco.mjtObj.mjOBJ_SITE, s.target)
         self._cam_id = self._id(mujoco.mjtObj.mjOBJ_CAMERA, scene.camera.name)
         self._body = {o.name: self._id(mujoco.mjtObj.mjOBJ_BODY, o.name) for o in scene.objects}
@@ -316,6 +332,15 @@ class Sim:
             )
         return poi_pose(self.data, self.poi_id)
 
+    def poi_frame(self) -> tuple[np.ndarray, np.ndarray]:
+        """The frame POI targets are given in, as world ``(R (3, 3), p (3,))``: the base's
+        body for a mobile manipulator's hand, else the world (display only: the teleop
+        viewer draws targets with it)."""
+        if self.mobile_manipulator:
+            b = self._base_body
+            return self.data.xmat[b].reshape(3, 3).copy(), self.data.xpos[b].copy()
+        return np.eye(3), np.zeros(3)
+
     def base_odometry(self) -> np.ndarray:
         """A mobile base's pose ``[x, y, yaw]`` from odometry [m, m, rad], yaw in (−π, π]."""
         x, y, yaw = self._odom
@@ -401,6 +426,8 @@ class Sim:
         r = self._renderer
         opt = mujoco.MjvOption()
         opt.geomgroup[:] = 1
+        if self.marker_id >= 0:
+            opt.geomgroup[MARKER_GROUP] = 0  # the teleop marker is the viewer's, not the world's
         opt.sitegroup[:] = 0  # sites (the POI marker) are not seen by a real camera
         r.update_scene(self.data, camera=self._cam_id, scene_option=opt)
         rgb = r.render().copy()
@@ -603,6 +630,30 @@ class Sim:
     def shows(self, variant: str) -> bool:
         """Whether the layout shows every object of ``variant``."""
         return set(dict(self.scene.variants)[variant]) <= set(self.present)
+
+
+def _with_target_marker(scene: Scene) -> mujoco.MjModel:
+    """The scene's model plus the teleop target marker: a mocap body :data:`MARKER_BODY`
+    with one small sphere in geom group :data:`MARKER_GROUP` that collides with nothing.
+
+    MuJoCo's viewer lets a person select a body (double-click) and move a mocap body with
+    Ctrl + right drag (rotate: Ctrl + left drag), which is how the paper's interactive
+    marker is dragged. A mocap body has no degrees of freedom and the geom no contacts, so
+    the physics is the scene's to the bit (``tests/test_keyboard.py`` checks it); the
+    sensor camera and the lidar leave the marker's group out.
+    """
+    spec = mujoco.MjSpec.from_string(scene.mjcf)
+    body = spec.worldbody.add_body(name=MARKER_BODY, mocap=True)
+    body.add_geom(
+        type=mujoco.mjtGeom.mjGEOM_SPHERE,
+        size=[MARKER_RADIUS, 0, 0],
+        rgba=[1.0, 0.1, 0.9, 0.7],
+        group=MARKER_GROUP,
+        contype=0,
+        conaffinity=0,
+        mass=0.0,
+    )
+    return spec.compile()
 
 
 def _half_height(obj: ObjectSpec) -> float:
