@@ -122,3 +122,49 @@ def test_success_when_placed_by_hand() -> None:
     sim.settle(1.0)
     assert sim.success() and sim.success("cube_on_green")
     assert not sim.success("pyramid_on_yellow")
+
+
+def _placed(scene_name: str, name: str, pose: tuple, variant: str | None = None) -> Sim:
+    scene = load_scene(scene_name)
+    layout = nominal_layout(scene, variant)
+    layout[name] = pose
+    sim = Sim(scene, layout)
+    sim.settle(2.0)
+    return sim
+
+
+def test_success_is_strict_about_the_footprint_rest_and_support() -> None:
+    """Strict success (issue 14): a box leaning over the container's wall, its centre
+    inside (the old centre-only check passed it), fails; so does one still moving; a cube
+    that slid off the cylinder onto the table fails and says what it touches."""
+    ox, oy, _, _ = load_scene("bench_pick").object("orange_box").pose
+    inside = _placed("bench_pick", "white_box", (ox, oy, 0.031, 0.0))
+    assert inside.success() and inside.success().reason == "box_in_box: white_box inside orange_box"
+    leaning = _placed("bench_pick", "white_box", (ox, oy + 0.04, 0.1, np.pi / 2))
+    centre = leaning.object_pose("white_box")[:2] - [ox, oy]
+    assert abs(centre[1]) < 0.08 - 0.01 - 0.02  # the centre is well inside the inner walls
+    assert not leaning.success() and "not resting inside" in leaning.success().reason
+    moving = _placed("bench_pick", "white_box", (ox, oy, 0.031, 0.0))
+    moving.data.qvel[moving._free_qadr["white_box"][1] + 5] = 1.0  # spinning about z
+    assert not moving.success() and "moving" in moving.success().reason
+    g = load_scene("pick_place").object("green_cylinder").pose
+    off = _placed("pick_place", "orange_cube", (g[0] + 0.045, g[1], 0.106, 0.3), "cube_green")
+    assert not off.success() and "touching table" in off.success().reason
+
+
+def test_the_teleop_marker_changes_neither_physics_nor_camera() -> None:
+    """The keyboard viewer's target marker (a mocap body, geom group 5): the same commands
+    give the same states to the bit, and the sensor camera renders the same pixels."""
+    scene = load_scene("pick_place")
+    plain, marked = Sim(scene), Sim(scene, target_marker=True)
+    assert marked.marker_id >= 0 and plain.marker_id == -1
+    mocap = marked.model.body_mocapid[marked.marker_id]
+    marked.data.mocap_pos[mocap] = marked.poi()[:3]  # where the viewer shows it
+    target = plain.poi()
+    for k in range(200):
+        cmd = PoiCommand(plain.t, target + [0.0005 * k, 0.0003 * k, -0.0002 * k, 0.0], 1.0)
+        plain.step(cmd)
+        marked.step(cmd)
+    assert np.array_equal(plain.data.qpos, marked.data.qpos)
+    a, b = plain.render_camera(), marked.render_camera()
+    assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.depth, b.depth)
