@@ -220,6 +220,13 @@ def object_points_on_planes(
         if plane is not None:
             keep = above_plane_mask(points, plane, params.plane_distance)
             points, colors = points[keep], colors[keep]
+    if params.outlier_neighbours > 0 and len(points):
+        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+        _, kept = pcd.remove_radius_outlier(
+            nb_points=params.outlier_neighbours, radius=params.outlier_radius
+        )
+        idx = np.asarray(kept, dtype=int)
+        points, colors = points[idx], colors[idx]
     # Self-filter last: the table is most of the cloud, so this tests far fewer points
     # against the robot's spheres; the robot's few points do not sway the RANSAC plane.
     keep = self_filter_mask(points, robot)

@@ -25,6 +25,7 @@ import numpy as np
 
 from smccli.errors import LogError, SceneError
 from smccli.schemas import KeyPath, check_yaml, parse_yaml, validate_yaml
+from smccli.world.noise import IDEAL, SensorNoise, parse_noise
 from smccli.world.robot import (
     DEFAULT_ROBOT,
     ROBOTS_DIR,
@@ -215,6 +216,8 @@ class Scene:
     """Doors the task opens (scene.yaml ``doors``), for the failure causes."""
     furniture: tuple[FurnitureSpec, ...] = ()
     """Bodies of the MJCF a layout moves as a whole; objects ``on`` them move along."""
+    noise: SensorNoise = IDEAL
+    """The sensor models (``sensors.noise``, :mod:`smccli.world.noise`): ideal by default."""
     perception: tuple[tuple[str, object], ...] = ()
     """Perception settings the scene's trees start with (scene.yaml ``perception``), as
     (name, value) pairs of :class:`~smccli.perception.params.PerceptionParams` fields."""
@@ -772,6 +775,9 @@ def _scene(
         ),
         furniture=_furniture(raw, objects, model, where, yaml_text),
         doors=_doors(raw, model, where, yaml_text),
+        noise=parse_noise(
+            (raw.get("sensors") or {}).get("noise"), _at(yaml_text, where, ("sensors", "noise"))
+        ),
     )
 
 

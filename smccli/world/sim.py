@@ -7,6 +7,7 @@ read simulator state and are for evaluation only.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 
@@ -16,6 +17,7 @@ import numpy as np
 from smccli.errors import SceneError
 from smccli.world.controller import CartesianController, poi_pose, wrap
 from smccli.world.lidar import Lidar, LidarReading
+from smccli.world.noise import NoisySensors
 from smccli.world.robot import robot_geoms
 from smccli.world.robot_model import RobotModel
 from smccli.world.scene import ROBOT_KEY, Condition, Layout, ObjectSpec, Scene, nominal_layout
@@ -193,10 +195,17 @@ class Sim:
 
     # --- state -------------------------------------------------------------------------
 
-    def reset(self, layout: Layout | None = None, base_pose: np.ndarray | None = None) -> None:
+    def reset(
+        self,
+        layout: Layout | None = None,
+        base_pose: np.ndarray | None = None,
+        noise_seed: int | None = None,
+    ) -> None:
         """Robot at home with the gripper open, objects at ``layout`` (default nominal), a
         mobile base at ``base_pose`` ``[x, y, yaw]`` [m, m, rad] (default: the layout's
-        :data:`ROBOT_KEY`, else the origin)."""
+        :data:`ROBOT_KEY`, else the origin). The sensor errors of the episode
+        (:mod:`smccli.world.noise`) are drawn with ``noise_seed`` (default: from the
+        layout, so a campaign's trials differ and each is reproducible)."""
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         if layout is None:
@@ -204,6 +213,10 @@ class Sim:
             first = self.scene.variants[0][0] if self.scene.variants else None
             layout = nominal_layout(self.scene, first)
         layout = dict(layout)
+        if noise_seed is None:
+            noise_seed = _layout_seed(layout)
+        self.sensor_noise = NoisySensors(self.scene.noise, noise_seed)
+        """This episode's sensor errors."""
         start = layout.pop(ROBOT_KEY, None)
         if base_pose is None:
             base_pose = np.zeros(3) if start is None else np.array([start[0], start[1], start[3]])
@@ -384,7 +397,7 @@ class Sim:
 
     def lidar(self) -> LidarReading | None:
         """A scan of the robot's lidar (its own geoms left out), or None without one."""
-        return None if self._lidar is None else self._lidar.scan(self.data)
+        return None if self._lidar is None else self.sensor_noise.scan(self._lidar.scan(self.data))
 
     def joint_state(self) -> JointState:
         """Positions, velocities and actuator efforts of the arm and finger joints."""
@@ -401,7 +414,7 @@ class Sim:
         """Mass resting on the scale [kg], tared; None if the scene has no scale."""
         if self._scale_sensor is None:
             return None
-        return (self._scale_force() - self._tare) / GRAVITY
+        return self.sensor_noise.weight(self.t, (self._scale_force() - self._tare) / GRAVITY)
 
     def _scale_force(self) -> float:
         # The force sensor gives what the platform's parent exerts on it, in the site frame
@@ -446,7 +459,7 @@ class Sim:
         r.disable_depth_rendering()
         far = self.model.vis.map.zfar * self.model.stat.extent
         depth[depth >= 0.999 * far] = 0.0
-        return CameraFrame(
+        frame = CameraFrame(
             t=self.t,
             rgb=rgb,
             depth=depth,
@@ -454,6 +467,7 @@ class Sim:
             T_world_camera=self.camera_pose(),
             frame_id="camera",
         )
+        return self.sensor_noise.frame(frame)
 
     def camera_matrix(self) -> np.ndarray:
         """Pinhole intrinsics from the camera's vertical field of view, shape (3, 3) [px].
@@ -690,6 +704,12 @@ class Sim:
     def shows(self, variant: str) -> bool:
         """Whether the layout shows every object of ``variant``."""
         return set(dict(self.scene.variants)[variant]) <= set(self.present)
+
+
+def _layout_seed(layout: Layout) -> int:
+    """A seed from a layout's poses (its names and numbers, in order)."""
+    text = repr(sorted((k, tuple(float(x) for x in v)) for k, v in layout.items()))
+    return int.from_bytes(hashlib.sha256(text.encode()).digest()[:8], "little")
 
 
 def _with_target_marker(scene: Scene) -> mujoco.MjModel:
