@@ -8,7 +8,13 @@ import mujoco
 import numpy as np
 import pytest
 
-from smccli.world.controller import CartesianController, reachable, rotation_error, wrap
+from smccli.world.controller import (
+    CartesianController,
+    reachable,
+    rotation_error,
+    target_rotation,
+    wrap,
+)
 from smccli.world.scene import Scene, load_scene
 from smccli.world.sensors import PoiCommand
 from smccli.world.sim import Sim
@@ -90,3 +96,197 @@ def test_joint_speed_is_capped(scene: Scene, model: mujoco.MjModel) -> None:
 def test_wrap() -> None:
     assert wrap(3 * math.pi / 2) == pytest.approx(-math.pi / 2)
     assert wrap(-math.pi) == pytest.approx(math.pi)
+
+
+# --- the SVD solve against the pinv solve it replaced -------------------------------------
+
+
+class _Reference:
+    """The controller's IK as it was before the single-SVD solve (as of e39229f): damped
+    step by ``numpy.linalg.solve`` on ``J Jᵀ + λ² I``, nullspace by ``numpy.linalg.pinv``.
+    Kept verbatim but for ``self`` -> ``self.c`` (the model, limits and gains of ``c``)."""
+
+    def __init__(self, c: CartesianController) -> None:
+        self.c = c
+        self.q = c.home.copy()
+        self._q_last_goal: float | None = None
+        self._jacp = np.zeros((3, c.model.nv))
+        self._jacr = np.zeros((3, c.model.nv))
+
+    def _set(self, q: np.ndarray) -> None:
+        self.c.data.qpos[self.c.qadr] = q
+        mujoco.mj_kinematics(self.c.model, self.c.data)
+        mujoco.mj_comPos(self.c.model, self.c.data)
+
+    def error(self, q: np.ndarray, target: np.ndarray) -> np.ndarray:
+        self._set(q)
+        pos = self.c.data.site_xpos[self.c.site_id]
+        R = self.c.data.site_xmat[self.c.site_id].reshape(3, 3)
+        return np.concatenate([target[:3] - pos, rotation_error(target_rotation(target[3]), R)])
+
+    def ik_step(self, q: np.ndarray, target: np.ndarray, max_step: float | None) -> np.ndarray:
+        c = self.c
+        e = self.error(q, target)
+        mujoco.mj_jacSite(c.model, c.data, self._jacp, self._jacr, c.site_id)
+        J = np.vstack([self._jacp[:, c.dofadr], self._jacr[:, c.dofadr]])
+        free = np.ones(len(q), dtype=bool)
+        for _ in range(3):
+            dq = self._step(J * free, e, q, target) * free
+            pushed = ((q <= c.lo + 1e-9) & (dq < 0)) | ((q >= c.hi - 1e-9) & (dq > 0))
+            if not (pushed & free).any():
+                break
+            free &= ~pushed
+        if max_step is not None:
+            biggest = np.max(np.abs(dq))
+            if biggest > max_step:
+                dq *= max_step / biggest
+        return np.clip(q + dq, c.lo, c.hi)
+
+    def _step(self, J: np.ndarray, e: np.ndarray, q: np.ndarray, target: np.ndarray) -> np.ndarray:
+        c = self.c
+        JJt = J @ J.T + c.damping**2 * np.eye(6)
+        dq = J.T @ np.linalg.solve(JJt, e)
+        N = np.eye(len(q)) - np.linalg.pinv(J, rcond=1e-4) @ J
+        posture = c.home - q
+        posture[0] = wrap(math.atan2(target[1], target[0]) - q[0])
+        if self._q_last_goal is not None:
+            posture[-1] = self._q_last_goal - q[-1]
+        return dq + N @ (c.nullspace_gain * posture)
+
+    def yaw_subgoal(self, q: np.ndarray, target: np.ndarray) -> np.ndarray:
+        c = self.c
+        self._set(q)
+        R = c.data.site_xmat[c.site_id].reshape(3, 3)
+        yaw = math.atan2(R[1, 0], R[0, 0])
+        d = wrap(target[3] - yaw)
+        q1 = math.atan2(target[1], target[0])
+        base = wrap(q1 + c._yaw_offset - target[3])
+        branches = [base + k * 2 * math.pi for k in (-1, 0, 1)]
+        inside = [b for b in branches if c.lo[-1] + 0.05 < b < c.hi[-1] - 0.05]
+        q_last = min(inside or branches, key=lambda b: abs(b - q[-1]))
+        self._q_last_goal = float(np.clip(q_last, c.lo[-1], c.hi[-1]))
+        planned = (q1 - q_last) - (q[0] - q[-1])
+        d += 2 * math.pi * round((planned - d) / (2 * math.pi))
+        sub = np.array(target, dtype=float)
+        sub[3] = yaw + float(np.clip(d, -0.5, 0.5))
+        return sub
+
+    def update(self, target: np.ndarray) -> np.ndarray:
+        target = np.asarray(target, dtype=float)
+        q = self.q
+        budget = self.c.max_step
+        for _ in range(self.c.iterations):
+            q_new = self.ik_step(q, self.yaw_subgoal(q, target), budget)
+            budget -= float(np.max(np.abs(q_new - q)))
+            q = q_new
+            if budget <= 1e-9:
+                break
+        self.q = q
+        return q
+
+    def solve(self, target: np.ndarray, tol_pos: float = 1e-3) -> tuple[np.ndarray, bool]:
+        tol_rot = math.radians(0.5)
+        c = self.c
+        target = np.asarray(target, dtype=float)
+        q = c.home.copy()
+        q[0] = np.clip(math.atan2(target[1], target[0]), c.lo[0], c.hi[0])
+        for _ in range(300):
+            e = self.error(q, target)
+            if np.linalg.norm(e[:3]) < tol_pos and np.linalg.norm(e[3:]) < tol_rot:
+                return q, True
+            q = self.ik_step(q, self.yaw_subgoal(q, target), 0.2)
+        e = self.error(q, target)
+        return q, bool(np.linalg.norm(e[:3]) < tol_pos and np.linalg.norm(e[3:]) < tol_rot)
+
+
+AGREE = 1e-9
+"""Joint targets of the SVD solve and the reference agree to this [rad] (rounding: the
+differences seen are about 1e-12)."""
+
+
+def _work_target(rng: np.random.Generator) -> np.ndarray:
+    return np.array(
+        [
+            rng.uniform(0.3, 0.65),
+            rng.uniform(-0.45, 0.45),
+            rng.uniform(0.02, 0.35),
+            rng.uniform(-math.pi, math.pi),
+        ]
+    )
+
+
+@pytest.mark.parametrize("name", [*SCENES, "loco_manip"])
+def test_ik_step_agrees_with_the_pinv_reference(name: str) -> None:
+    """Random states (a fifth of the joints pushed onto a limit, so locking runs and the
+    locked Jacobians lose rank) and targets: the error, the subgoal and one step agree with
+    the old solve."""
+    scene = load_scene(name)
+    model = scene.model()
+    ctl = CartesianController(model, scene.robot)
+    ref = _Reference(CartesianController(model, scene.robot))
+    rng = np.random.default_rng(2)
+    n = len(ctl.home)
+    worst = 0.0
+    locked = 0
+    for _ in range(150):
+        q = rng.uniform(ctl.lo, ctl.hi)
+        at = rng.random(n) < 0.2
+        q[at] = np.where(rng.random(n) < 0.5, ctl.lo, ctl.hi)[at]
+        target = _work_target(rng)
+        np.testing.assert_allclose(ctl.error(q, target), ref.error(q, target), atol=1e-12)
+        sub = ctl.yaw_subgoal(q, target)
+        np.testing.assert_allclose(sub, ref.yaw_subgoal(q, target), atol=1e-12)
+        for max_step in (None, 0.2, 0.025):
+            new, old = ctl.ik_step(q, sub, max_step), ref.ik_step(q, sub, max_step)
+            worst = max(worst, float(np.max(np.abs(new - old))))
+        locked += bool(at.any())
+    assert worst < AGREE, worst
+    assert locked > 50
+
+
+def test_singular_jacobians_agree_with_the_pinv_reference() -> None:
+    """The arm stretched straight up (joints 1, 3, 5 and 7 on one axis): J has rank 4, the
+    pinv truncation decides the nullspace, and the step still agrees."""
+    scene = load_scene("pick_place")
+    model = scene.model()
+    ctl = CartesianController(model, scene.robot)
+    ref = _Reference(CartesianController(model, scene.robot))
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        q = rng.uniform(ctl.lo, ctl.hi)
+        q[[1, 3, 5]] = 0.0
+        ctl._set(q)
+        jac = np.zeros((6, model.nv))
+        mujoco.mj_jacSite(model, ctl.data, jac[:3], jac[3:], ctl.site_id)
+        s = np.linalg.svd(jac[:, ctl.dofadr], compute_uv=False)
+        assert s[-1] < 1e-4 * s[0]
+        target = _work_target(rng)
+        sub = ctl.yaw_subgoal(q, target)
+        ref.yaw_subgoal(q, target)
+        assert np.max(np.abs(ctl.ik_step(q, sub, None) - ref.ik_step(q, sub, None))) < AGREE
+
+
+@pytest.mark.parametrize("name", [*SCENES, "loco_manip"])
+def test_control_ticks_and_full_ik_agree_with_the_pinv_reference(name: str) -> None:
+    """Closed loop: 600 control ticks towards targets that jump every 60 ticks (joint
+    targets compared every tick), then the full IK on random targets, reachable or not."""
+    scene = load_scene(name)
+    model = scene.model()
+    ctl = CartesianController(model, scene.robot)
+    ref = _Reference(CartesianController(model, scene.robot))
+    rng = np.random.default_rng(3)
+    worst = 0.0
+    target = _work_target(rng)
+    for tick in range(600):
+        if tick % 60 == 0:
+            target = _work_target(rng)
+        worst = max(worst, float(np.max(np.abs(ctl.update(target) - ref.update(target)))))
+    assert worst < AGREE, worst
+    verdicts = []
+    for _ in range(6):
+        target = _work_target(rng) * [1.4, 1.4, 1.0, 1.0]  # some beyond reach
+        (q_new, ok_new), (q_old, ok_old) = ctl.solve(target), ref.solve(target)
+        assert ok_new == ok_old
+        assert np.max(np.abs(q_new - q_old)) < AGREE
+        verdicts.append(ok_new)
+    assert any(verdicts)

@@ -10,6 +10,12 @@ frame) [rad]. The controller solves on its own ``MjData`` (kinematics only) from
 joint target, so the position servos receive a consistent, smooth target and the robot's
 dynamics (sag, contacts) never feed back into the IK. The same controller serves teleop
 and replay.
+
+Both terms come from one thin SVD ``J = U Σ Vᵀ`` (``J`` is 6 x n): the damped step is
+``V Σ (Σ² + λ²)⁻¹ Uᵀ e`` and ``J⁺ J = V_r V_rᵀ`` over the singular values above
+``1e-4 σ_max`` (the truncation of ``numpy.linalg.pinv(J, rcond=1e-4)``). It runs three
+times per control period, so the hot path calls LAPACK directly and reuses buffers: the
+IK was most of a campaign's time, more than the physics.
 """
 
 from __future__ import annotations
@@ -18,12 +24,17 @@ import math
 
 import mujoco
 import numpy as np
+from scipy.linalg import lapack
 
 from smccli.errors import SceneError
 from smccli.world.robot import Robot
 
 # Flip so that the POI z axis points down; the yaw then rotates about world z.
 _DOWN = np.diag([1.0, -1.0, -1.0])
+_RCOND = 1e-4
+"""Singular values of ``J`` below this fraction of the largest are zero in ``J⁺``."""
+_AT_LIMIT = 1e-9
+"""A joint this close to a limit [rad] is at it."""
 
 
 def target_rotation(yaw: float) -> np.ndarray:
@@ -50,6 +61,23 @@ def poi_pose(data: mujoco.MjData, site_id: int) -> np.ndarray:
     """POI ``[x, y, z, yaw]`` from a site's pose; yaw is that of the site's x axis."""
     R = data.site_xmat[site_id].reshape(3, 3)
     return np.array([*data.site_xpos[site_id], math.atan2(R[1, 0], R[0, 0])])
+
+
+def _svd(J: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Thin SVD ``U, σ, Vᵀ`` of ``J`` (m x n): shapes (m, k), (k,), (k, n), k = min(m, n).
+
+    LAPACK's ``gesdd`` called directly (numpy's wrapper costs twice the decomposition of
+    a 6 x 7 matrix); numpy's SVD, which raises on failure, if it does not converge."""
+    u, s, vt, info = lapack.dgesdd(J, compute_uv=1, full_matrices=0)
+    if info != 0:
+        u, s, vt = np.linalg.svd(J, full_matrices=False)
+    return u, s, vt
+
+
+def _span(adr: np.ndarray) -> slice | np.ndarray:
+    """``adr`` as a slice when the addresses are consecutive (indexing gives a view)."""
+    first, n = int(adr[0]), len(adr)
+    return slice(first, first + n) if np.array_equal(adr, np.arange(first, first + n)) else adr
 
 
 class CartesianController:
@@ -94,16 +122,30 @@ class CartesianController:
         self.iterations = iterations
         self.q = self.home.copy()
         """Current joint target, shape (n,) [rad]."""
+        # Buffers of the hot path (update runs `iterations` IK steps every control period).
+        self._qpos = _span(self.qadr)
+        self._dofs = _span(self.dofadr)
+        self._lo_tol = self.lo + _AT_LIMIT
+        self._hi_tol = self.hi - _AT_LIMIT
+        self._last_lo, self._last_hi = float(self.lo[-1]), float(self.hi[-1])
+        self._jac = np.zeros((6, model.nv))
+        """Site Jacobian, position rows then rotation rows, shape (6, nv)."""
+        self._e = np.zeros(6)
+        self._R_target = np.zeros((3, 3))
+        self._R_target[2, 2] = -1.0
+        self._R_err = np.zeros((3, 3))
+        self._quat = np.zeros(4)
+        self._sub = np.zeros(4)
         # Pointing down in the home posture's shape, POI yaw = q_first - q_last + offset;
         # the offset is the robot's (0 for the arm, pi/4 for the Panda's hand), read at home.
         self._yaw_offset = wrap(self.forward(self.home)[3] - (self.home[0] - self.home[-1]))
         self._q_last_goal: float | None = None
-        self._jacp = np.zeros((3, model.nv))
-        self._jacr = np.zeros((3, model.nv))
 
     def reset(self, q: np.ndarray) -> None:
-        """Restart from joint positions ``q``, shape (n,) [rad]."""
+        """Restart from joint positions ``q``, shape (n,) [rad]; forgets the yaw branch (as a
+        new controller would: :meth:`update` chooses one before it uses it)."""
         self.q = np.clip(np.asarray(q, dtype=float), self.lo, self.hi)
+        self._q_last_goal = None
 
     def forward(self, q: np.ndarray) -> np.ndarray:
         """POI ``[x, y, z, yaw]`` at joint positions ``q`` (forward kinematics)."""
@@ -111,52 +153,77 @@ class CartesianController:
         return poi_pose(self.data, self.site_id)
 
     def _set(self, q: np.ndarray) -> None:
-        self.data.qpos[self.qadr] = q
+        self.data.qpos[self._qpos] = q
         mujoco.mj_kinematics(self.model, self.data)
         mujoco.mj_comPos(self.model, self.data)
 
     def error(self, q: np.ndarray, target: np.ndarray) -> np.ndarray:
         """Task error at ``q``: position [m] and orientation [rad], shape (6,)."""
         self._set(q)
-        pos = self.data.site_xpos[self.site_id]
-        R = self.data.site_xmat[self.site_id].reshape(3, 3)
-        return np.concatenate([target[:3] - pos, rotation_error(target_rotation(target[3]), R)])
+        return self._error(np.asarray(target, dtype=float)).copy()
+
+    def _error(self, target: np.ndarray) -> np.ndarray:
+        """:meth:`error` at the kinematics last set, into a buffer; the target rotation is
+        :func:`target_rotation` written out."""
+        e, sid = self._e, self.site_id
+        np.subtract(target[:3], self.data.site_xpos[sid], out=e[:3])
+        c, s = math.cos(target[3]), math.sin(target[3])
+        R_target = self._R_target  # Rz(yaw) @ _DOWN, the zeros and -1 set once
+        R_target[0, 0], R_target[0, 1], R_target[1, 0], R_target[1, 1] = c, s, s, -c
+        mujoco.mju_mulMatMatT(self._R_err, R_target, self.data.site_xmat[sid].reshape(3, 3))
+        mujoco.mju_mat2Quat(self._quat, self._R_err.ravel())
+        mujoco.mju_quat2Vel(e[3:], self._quat, 1.0)
+        return e
 
     def ik_step(self, q: np.ndarray, target: np.ndarray, max_step: float | None) -> np.ndarray:
         """One damped-least-squares step from ``q`` towards ``target``; returns the new q."""
-        e = self.error(q, target)
-        mujoco.mj_jacSite(self.model, self.data, self._jacp, self._jacr, self.site_id)
-        J = np.vstack([self._jacp[:, self.dofadr], self._jacr[:, self.dofadr]])
-        # A joint at a limit that the step pushes further would have its share clipped away
-        # and the error would stay (the Panda's wrist roll, 5.8 rad of travel, stalled 0.4
-        # rad short): lock it for this step so the other joints take the error up.
-        free = np.ones(len(q), dtype=bool)
-        for _ in range(3):
-            dq = self._step(J * free, e, q, target) * free
-            pushed = ((q <= self.lo + 1e-9) & (dq < 0)) | ((q >= self.hi - 1e-9) & (dq > 0))
-            if not (pushed & free).any():
-                break
-            free &= ~pushed
-        if max_step is not None:
-            biggest = np.max(np.abs(dq))
-            if biggest > max_step:
-                dq *= max_step / biggest
-        return np.clip(q + dq, self.lo, self.hi)
+        self._set(q)
+        return self._ik_step(q, np.asarray(target, dtype=float), max_step)
 
-    def _step(self, J: np.ndarray, e: np.ndarray, q: np.ndarray, target: np.ndarray) -> np.ndarray:
-        """Damped least squares on ``J`` plus the posture pull in its nullspace."""
-        JJt = J @ J.T + self.damping**2 * np.eye(6)
-        dq = J.T @ np.linalg.solve(JJt, e)
-        # Nullspace: keep the elbow and the redundant rolls near the home posture.
-        # Exact projector (not the damped one), so the posture pull leaves no task error.
-        N = np.eye(len(q)) - np.linalg.pinv(J, rcond=1e-4) @ J
+    def _ik_step(self, q: np.ndarray, target: np.ndarray, max_step: float | None) -> np.ndarray:
+        """:meth:`ik_step` at the kinematics last set (those of ``q``)."""
+        e = self._error(target)
+        jac = self._jac
+        mujoco.mj_jacSite(self.model, self.data, jac[:3], jac[3:], self.site_id)
+        J = jac[:, self._dofs]
+        # Nullspace: keep the elbow and the redundant rolls near the home posture. The base
+        # yaw's comfortable value points the arm at the target, the last joint's is the
+        # branch :meth:`yaw_subgoal` chose for the target's yaw.
         posture = self.home - q
-        # The base yaw's comfortable value points the arm at the target, the last joint's
-        # is the branch :meth:`yaw_subgoal` chose for the target's yaw.
         posture[0] = wrap(math.atan2(target[1], target[0]) - q[0])
         if self._q_last_goal is not None:
             posture[-1] = self._q_last_goal - q[-1]
-        return dq + N @ (self.nullspace_gain * posture)
+        pull = self.nullspace_gain * posture
+        dq = self._step(J, e, pull)
+        # A joint at a limit that the step pushes further would have its share clipped away
+        # and the error would stay (the Panda's wrist roll, 5.8 rad of travel, stalled 0.4
+        # rad short): lock it for this step so the other joints take the error up.
+        at_lo, at_hi = q <= self._lo_tol, q >= self._hi_tol
+        if at_lo.any() or at_hi.any():
+            free = np.ones(len(q), dtype=bool)
+            for _ in range(2):
+                pushed = (at_lo & (dq < 0)) | (at_hi & (dq > 0))
+                if not (pushed & free).any():
+                    break
+                free &= ~pushed
+                dq = self._step(J * free, e, pull) * free
+        if max_step is not None:
+            biggest = float(np.abs(dq).max())
+            if biggest > max_step:
+                dq *= max_step / biggest
+        dq += q
+        return np.minimum(np.maximum(dq, self.lo, out=dq), self.hi, out=dq)
+
+    def _step(self, J: np.ndarray, e: np.ndarray, pull: np.ndarray) -> np.ndarray:
+        """Damped least squares on ``J`` plus the posture ``pull`` in its nullspace.
+
+        Exact projector (not the damped one), so the posture pull leaves no task error."""
+        u, s, vt = _svd(J)
+        # In the right singular basis: Σ(Σ² + λ²)⁻¹ Uᵀ e, less the pull's share in the row
+        # space (σ sorted descending, so σ_max = s[0]).
+        c = s / (s * s + self.damping**2) * (u.T @ e)
+        c -= (vt @ pull) * (s > _RCOND * s[0])
+        return pull + vt.T @ c
 
     def yaw_subgoal(self, q: np.ndarray, target: np.ndarray) -> np.ndarray:
         """``target`` with its yaw replaced by a waypoint at most 0.5 rad from the current yaw.
@@ -170,19 +237,26 @@ class CartesianController:
         redundant joints do not wind up to trade the last joint's travel for theirs.
         """
         self._set(q)
-        R = self.data.site_xmat[self.site_id].reshape(3, 3)
-        yaw = math.atan2(R[1, 0], R[0, 0])
-        d = wrap(target[3] - yaw)
-        q1 = math.atan2(target[1], target[0])
-        base = wrap(q1 + self._yaw_offset - target[3])
+        return self._yaw_subgoal(q, np.asarray(target, dtype=float)).copy()
+
+    def _yaw_subgoal(self, q: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """:meth:`yaw_subgoal` at the kinematics last set (those of ``q``), into a buffer."""
+        R = self.data.site_xmat[self.site_id]  # row-major 3 x 3
+        yaw = math.atan2(R[3], R[0])
+        x, y, _, target_yaw = target.tolist()
+        q_first, q_last_now = q[0].item(), q[-1].item()
+        d = wrap(target_yaw - yaw)
+        q1 = math.atan2(y, x)
+        base = wrap(q1 + self._yaw_offset - target_yaw)
         branches = [base + k * 2 * math.pi for k in (-1, 0, 1)]
-        inside = [b for b in branches if self.lo[-1] + 0.05 < b < self.hi[-1] - 0.05]
-        q_last = min(inside or branches, key=lambda b: abs(b - q[-1]))
-        self._q_last_goal = float(np.clip(q_last, self.lo[-1], self.hi[-1]))
-        planned = (q1 - q_last) - (q[0] - q[-1])  # unwrapped yaw change on that branch
+        inside = [b for b in branches if self._last_lo + 0.05 < b < self._last_hi - 0.05]
+        q_last = min(inside or branches, key=lambda b: abs(b - q_last_now))
+        self._q_last_goal = min(max(q_last, self._last_lo), self._last_hi)
+        planned = (q1 - q_last) - (q_first - q_last_now)  # unwrapped yaw change on that branch
         d += 2 * math.pi * round((planned - d) / (2 * math.pi))
-        sub = np.array(target, dtype=float)
-        sub[3] = yaw + float(np.clip(d, -0.5, 0.5))
+        sub = self._sub
+        sub[:] = target
+        sub[3] = yaw + min(max(d, -0.5), 0.5)
         return sub
 
     def update(self, target: np.ndarray) -> np.ndarray:
@@ -191,8 +265,9 @@ class CartesianController:
         q = self.q
         budget = self.max_step
         for _ in range(self.iterations):
-            q_new = self.ik_step(q, self.yaw_subgoal(q, target), budget)
-            budget -= float(np.max(np.abs(q_new - q)))
+            self._set(q)
+            q_new = self._ik_step(q, self._yaw_subgoal(q, target), budget)
+            budget -= float(np.abs(q_new - q).max())
             q = q_new
             if budget <= 1e-9:
                 break
@@ -214,10 +289,11 @@ class CartesianController:
         # Start the base yaw pointing at the target: avoids the DLS wandering at the start.
         q[0] = np.clip(math.atan2(target[1], target[0]), self.lo[0], self.hi[0])
         for _ in range(max_iterations):
-            e = self.error(q, target)
+            self._set(q)
+            e = self._error(target)
             if np.linalg.norm(e[:3]) < tol_pos and np.linalg.norm(e[3:]) < tol_rot:
                 return q, True
-            q = self.ik_step(q, self.yaw_subgoal(q, target), 0.2)
+            q = self._ik_step(q, self._yaw_subgoal(q, target), 0.2)
         e = self.error(q, target)
         return q, bool(np.linalg.norm(e[:3]) < tol_pos and np.linalg.norm(e[3:]) < tol_rot)
 

@@ -1,0 +1,99 @@
+"""Campaign throughput on bench_pick: ``python -m smccli.bench.throughput``.
+
+The sample ``bench_pick`` tree, ``--trials`` (40) trials with ``--seed`` (0), run with each
+of ``--workers`` (1 2) local processes, as ``smc replay TREE --trials 40 --workers W --seed
+0`` does. Per worker count: wall time and trials/s (the campaign's own, without imports or
+compiling the tree), trials/s per worker, and the CPU time the campaign used (this process
+and its workers) with trials per CPU second: on a machine shared with other jobs the wall
+time says as much about them as about smc, the CPU time much less. Every run must give the
+same outcomes (``workers`` changes nothing but the wall time), else exit 1.
+
+Writes ``docs/bench_throughput.json`` (``--out``).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import resource  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+from smccli.bench.meta import machine  # noqa: E402
+from smccli.bench.paper import REPO  # noqa: E402
+from smccli.execute.campaign import run_campaign  # noqa: E402
+from smccli.learn.compile import compile_logs  # noqa: E402
+from smccli.outputs import check_output, write_atomic  # noqa: E402
+
+
+def _cpu_s() -> float:
+    """CPU time [s] (user + system) of this process and of its children waited for."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--trials", type=int, default=40)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--out", type=Path, default=REPO / "docs" / "bench_throughput.json")
+    args = ap.parse_args(argv)
+    check_output(args.out, force=True)
+    meta = machine()
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = Path(tmp) / "bench_pick.json"
+        compile_logs(sorted((REPO / "sample_logs" / "bench_pick").glob("*.mcap")), tree)
+        rows: list[dict[str, Any]] = []
+        reference: list[tuple[int, str]] | None = None
+        for n in args.workers:
+            load = os.getloadavg()[0]
+            cpu0 = _cpu_s()
+            s = run_campaign(tree, trials=args.trials, seed=args.seed, workers=n)
+            cpu = _cpu_s() - cpu0
+            outcomes = [(r["index"], r["outcome"]) for r in s["trial_results"]]
+            reference = reference or outcomes
+            if outcomes != reference:
+                print(f"{n} workers: outcomes differ from the first run", file=sys.stderr)
+                return 1
+            rows.append(
+                {
+                    "workers": n,
+                    "trials": args.trials,
+                    "successes": s["successes"],
+                    "wall_s": s["wall_s"],
+                    "trials_per_second": s["trials_per_second"],
+                    "trials_per_second_per_worker": s["trials_per_second"] / n,
+                    "cpu_s": cpu,
+                    "trials_per_cpu_second": args.trials / cpu,
+                    "load_average_before": load,
+                }
+            )
+            print(
+                f"{n} workers: {s['successes']}/{args.trials}, {s['wall_s']:.1f} s wall, "
+                f"{s['trials_per_second']:.2f} trials/s ({s['trials_per_second'] / n:.2f} per "
+                f"worker), {cpu:.1f} s CPU ({args.trials / cpu:.2f} trials per CPU s), "
+                f"load before {load:.1f}",
+                flush=True,
+            )
+    result = {
+        "machine": meta,
+        "command": "python -m smccli.bench.throughput " + " ".join(argv or sys.argv[1:]),
+        "scene": "bench_pick",
+        "seed": args.seed,
+        "rows": rows,
+    }
+    write_atomic(args.out, json.dumps(result, indent=1) + "\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
