@@ -209,6 +209,14 @@ def compile_cmd(
         ),
     ] = None,
     topics: TopicsOption = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            help="Processes reading the logs in parallel (default: one per core, at most one "
+            "per log; 1: none). The tree is the same.",
+        ),
+    ] = None,
 ) -> None:
     """Segment logs, extract SMCs and merge them into a versioned tree.json."""
     from smccli.learn.compile import compile_logs
@@ -244,6 +252,7 @@ def compile_cmd(
             on_progress=on_progress,
             on_warning=lambda m: err.print(f"[yellow]warning:[/] {escape(m)}"),
             topic_map=topic_map,
+            workers=workers,
         )
         progress.update(task, completed=len(logs))
     for p in result.skipped:
@@ -442,6 +451,13 @@ def replay(
             max=0.5,
         ),
     ] = 0.0,
+    speed: Annotated[
+        float,
+        typer.Option(
+            help="Play every movement primitive this many times faster than demonstrated "
+            "(up to the tree's limit: the robot's POI is held to 0.5 m/s)."
+        ),
+    ] = 1.0,
 ) -> None:
     """Execute the tree autonomously in simulation: one episode or a campaign."""
     from smccli.execute import run_campaign, run_episode
@@ -495,6 +511,7 @@ def replay(
                 on_trial=on_trial,
                 drift=drift,
                 cluster=cluster,
+                speed=speed,
             )
         _print_campaign(summary)
         if min_success is not None and summary["success_rate"] < min_success:
@@ -513,6 +530,7 @@ def replay(
         force=force,
         drift=drift,
         teach=teach_cfg,
+        speed=speed,
     )
     _print_episode(result)
     if result.outcome != "success":

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from smccli.learn.segmentation import SegmentMode, Trace, segment
+from smccli.learn.trim import IdleParams
 
 DT = 0.01
 
@@ -99,14 +101,61 @@ def test_double_press_collapses():
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.floats(0.05, 11.9), max_size=8), st.sampled_from(list(SegmentMode)))
-def test_fragments_tile_time_in_order(marks, mode):
-    """Invariants: contiguous, ordered, each at least min_fragment long, inside the log."""
-    tr = make_trace(t_end=12.0, closes=(2.0,), opens=(6.0,), marks=sorted(marks))
-    frags = seg(tr, mode)
-    assert frags and frags[0].t0 == 0.0
-    for a, b in zip(frags, frags[1:], strict=False):
+@given(
+    st.lists(st.floats(0.05, 11.9), max_size=8),
+    st.sampled_from(list(SegmentMode)),
+    st.lists(st.tuples(st.floats(0.0, 11.0), st.floats(0.2, 3.0)), max_size=3),
+)
+def test_fragments_tile_time_in_order(marks, mode, pauses):
+    """Invariants: untrimmed fragments are contiguous, ordered, each at least min_fragment
+    long, inside the log; trimmed ones lie inside their untrimmed tile, in order, still at
+    least min_fragment long (idle heads and tails are cut, never motion)."""
+    tr = make_trace(
+        t_end=12.0,
+        closes=(2.0,),
+        opens=(6.0,),
+        marks=sorted(marks),
+        pauses=[(a, a + d) for a, d in pauses],
+    )
+    tiles = segment(
+        tr, mode, snap_window=0.5, min_fragment=0.3, auto_gap=4.0, idle=IdleParams(trim=False)
+    )
+    assert tiles and tiles[0].t0 == 0.0
+    for a, b in zip(tiles, tiles[1:], strict=False):
         assert a.t1 == b.t0
-    for f in frags:
-        assert f.t1 - f.t0 >= 0.3 - 1e-9 or len(frags) == 1
+    for f in tiles:
+        assert f.t1 - f.t0 >= 0.3 - 1e-9 or len(tiles) == 1
         assert 0.0 <= f.t0 < f.t1 <= tr.t_end + 1e-9
+    frags = seg(tr, mode)
+    assert len(frags) == len(tiles)
+    for f, tile in zip(frags, tiles, strict=True):
+        assert tile.t0 <= f.t0 < f.t1 <= tile.t1
+        assert f.t0 - tile.t0 == pytest.approx(f.idle_head)
+        assert tile.t1 - f.t1 == pytest.approx(f.idle_tail)
+        assert f.t1 - f.t0 >= min(0.3, tile.t1 - tile.t0) - 1e-9
+
+
+def test_idle_head_and_tail_are_trimmed_from_a_pause():
+    """A fragment that starts with a 2 s pause and ends with a 1.5 s one loses both."""
+    tr = make_trace(t_end=10.0, pauses=[(0.0, 2.0), (4.5, 6.0)], marks=(6.0,))
+    (f,) = seg(tr)
+    assert 1.7 <= f.t0 <= 2.0 and 4.5 <= f.t1 <= 4.8
+    (g,) = segment(
+        tr,
+        SegmentMode.markers,
+        snap_window=0.5,
+        min_fragment=0.3,
+        auto_gap=4.0,
+        idle=IdleParams(trim=False),
+    )
+    assert (g.t0, g.t1) == (0.0, 6.0)
+
+
+def test_a_mobile_manipulators_fragments_keep_their_start():
+    """Its slow camera and lidar record at the decision points: only the tail is trimmed."""
+    tr = make_trace(t_end=10.0, pauses=[(0.0, 2.0), (4.5, 6.0)], marks=(6.0,))
+    tr = Trace(
+        **{**{k: getattr(tr, k) for k in Trace.__slots__}, "base": np.zeros((len(tr.t_cmd), 3))}
+    )
+    (f,) = seg(tr)
+    assert f.t0 == 0.0 and 4.5 <= f.t1 <= 4.8

@@ -35,6 +35,7 @@ from scipy.stats import binomtest  # noqa: E402
 from smccli.errors import SmcError  # noqa: E402
 from smccli.execute.episode import episode, layout_for, resolve, scene_note  # noqa: E402
 from smccli.execute.evaluation import OUTCOMES  # noqa: E402
+from smccli.execute.executor import check_speed  # noqa: E402
 from smccli.learn.tree import Tree, digest  # noqa: E402
 from smccli.outputs import check_output, write_atomic  # noqa: E402
 from smccli.world.scene import ROBOT_KEY, Scene  # noqa: E402
@@ -94,12 +95,17 @@ class TrialResult:
 
 
 def run_trial(
-    tree: Tree, scene: Scene, seed: int, index: int, drift: OdometryDrift | None = None
+    tree: Tree,
+    scene: Scene,
+    seed: int,
+    index: int,
+    drift: OdometryDrift | None = None,
+    speed: float = 1.0,
 ) -> TrialResult:
-    """Trial ``index`` of the campaign with ``seed``; the distance bands are over the
-    manipulated object's start, or a mobile base's."""
+    """Trial ``index`` of the campaign with ``seed``, its DMPs ``speed`` times faster; the
+    distance bands are over the manipulated object's start, or a mobile base's."""
     layout = layout_for(scene, seed, index)
-    r = episode(tree, scene, layout, seed=seed, drift=drift)
+    r = episode(tree, scene, layout, seed=seed, drift=drift, speed=speed)
     obj = r.manipulated
     dist = yaw = 0.0
     if scene.start is not None and ROBOT_KEY in layout:
@@ -136,13 +142,15 @@ def run_trial(
 _WORKER: dict[str, Any] = {}
 
 
-def _init_worker(tree: Tree, scene: Scene, seed: int, drift: OdometryDrift | None) -> None:
-    _WORKER.update(tree=tree, scene=scene, seed=seed, drift=drift)
+def _init_worker(
+    tree: Tree, scene: Scene, seed: int, drift: OdometryDrift | None, speed: float = 1.0
+) -> None:
+    _WORKER.update(tree=tree, scene=scene, seed=seed, drift=drift, speed=speed)
 
 
 def _work(index: int) -> TrialResult:
     w = _WORKER
-    return run_trial(w["tree"], w["scene"], w["seed"], index, w["drift"])
+    return run_trial(w["tree"], w["scene"], w["seed"], index, w["drift"], w["speed"])
 
 
 CLUSTER_TIMEOUT = 10.0
@@ -180,6 +188,7 @@ def _cluster_trials(
     drift: OdometryDrift | None,
     todo: list[int],
     address: str,
+    speed: float = 1.0,
 ) -> Iterator[TrialResult]:
     """Each trial of ``todo`` as one task on the Dask cluster at ``address``, yielded as
     they finish. The tree and the scene go to every worker once, not with each task."""
@@ -188,7 +197,8 @@ def _cluster_trials(
     with cluster_client(address) as client:
         tree_f, scene_f = client.scatter([tree, scene], broadcast=True, hash=False)
         futures = [
-            client.submit(run_trial, tree_f, scene_f, seed, i, drift, pure=False) for i in todo
+            client.submit(run_trial, tree_f, scene_f, seed, i, drift, speed, pure=False)
+            for i in todo
         ]
         try:
             for fut in as_completed(futures, loop=client.loop):
@@ -208,10 +218,12 @@ def run_trials(
     indices: Sequence[int] | None = None,
     drift: OdometryDrift | None = None,
     cluster: str | None = None,
+    speed: float = 1.0,
 ) -> list[TrialResult]:
     """Run the trials (``range(trials)`` or ``indices``) over ``workers`` processes, or on
     the Dask cluster whose scheduler is at ``cluster``; results in index order, the same
-    either way. ``on_trial(done, successes)`` after each."""
+    either way. ``on_trial(done, successes)`` after each; ``speed``: every DMP that many
+    times faster."""
     todo = list(range(trials)) if indices is None else list(indices)
     results: list[TrialResult] = []
     ok = 0
@@ -224,15 +236,17 @@ def run_trials(
             on_trial(len(results), ok)
 
     if cluster is not None:
-        for res in _cluster_trials(tree, scene, seed, drift, todo, cluster):
+        for res in _cluster_trials(tree, scene, seed, drift, todo, cluster, speed):
             done(res)
     elif workers <= 1 or len(todo) <= 1:
         for i in todo:
-            done(run_trial(tree, scene, seed, i, drift))
+            done(run_trial(tree, scene, seed, i, drift, speed))
     else:
         ctx = mp.get_context("spawn")
         with ctx.Pool(
-            min(workers, len(todo)), initializer=_init_worker, initargs=(tree, scene, seed, drift)
+            min(workers, len(todo)),
+            initializer=_init_worker,
+            initargs=(tree, scene, seed, drift, speed),
         ) as pool:
             for res in pool.imap_unordered(_work, todo, chunksize=1):
                 done(res)
@@ -331,10 +345,12 @@ def run_campaign(
     force: bool = False,
     drift: OdometryDrift | None = None,
     cluster: str | None = None,
+    speed: float = 1.0,
 ) -> dict[str, Any]:
     """``smc replay TREE --trials N --seed S --workers W [--report FILE]``: the summary.
     ``cluster``: the address of a Dask scheduler whose workers run the trials instead
-    (``--cluster``; ``workers`` is then theirs).
+    (``--cluster``; ``workers`` is then theirs); ``speed``: every DMP that many times
+    faster (``--speed``; SmcError beyond the tree's limit, before the first trial).
 
     The report is checked before the first trial (folder writable; an existing file needs
     ``force``) and written atomically.
@@ -344,6 +360,7 @@ def run_campaign(
     if report is not None:
         check_output(report, force=force)
     t, sc = resolve(tree, scene)
+    check_speed(t, speed)
     wall0 = time.perf_counter()
     if cluster is not None:
         with cluster_client(cluster) as client:  # fail before the first trial, not after
@@ -357,6 +374,7 @@ def run_campaign(
         on_trial=on_trial,
         drift=drift,
         cluster=cluster,
+        speed=speed,
     )
     summary = summarize(
         results,
@@ -371,6 +389,7 @@ def run_campaign(
     summary["note"] = scene_note(t, sc)
     summary["odometry_drift"] = None if drift is None else asdict(drift)
     summary["cluster"] = cluster
+    summary["speed"] = speed
     if report is not None:
         write_atomic(report, json.dumps(summary, indent=1, allow_nan=False) + "\n")
     return summary

@@ -23,7 +23,7 @@ import numpy as np
 
 from smccli.errors import OutputError, SceneError, TreeError
 from smccli.execute.evaluation import HandleWatch, score
-from smccli.execute.executor import ActionTrace, Decision, TreeExecutor
+from smccli.execute.executor import ActionTrace, Decision, TreeExecutor, check_speed
 from smccli.execute.replay_log import ReplayLog
 from smccli.execute.sensing import Sensors
 from smccli.execute.teach import TeachConfig, Teaching, check_teach
@@ -79,6 +79,8 @@ class EpisodeResult:
     """Said about the run, e.g. that the scene is not the one the tree was taught in."""
     taught: Teaching | None = None
     """What an operator taught where no SMC was contingent (``teach``), if anything."""
+    speed: float = 1.0
+    """How many times faster than demonstrated the DMPs ran (``--speed``)."""
 
     @property
     def latencies_ms(self) -> list[float]:
@@ -100,6 +102,7 @@ class EpisodeResult:
                 "p50": float(np.median(lat)) if lat else None,
                 "max": max(lat) if lat else None,
             },
+            "speed": self.speed,
             "duration_s": self.duration,
             "demo_duration_s": self.demo_duration,
             "duration_ratio": self.duration / self.demo_duration if self.demo_duration else None,
@@ -205,7 +208,9 @@ def layout_for(scene: Scene, seed: int, trial: int = 0) -> Layout:
 
 
 def demo_duration(path: Sequence[Edge]) -> float:
-    """Sum over the edges taken of their source fragments' mean duration [s]."""
+    """Sum over the edges taken of their source fragments' mean duration [s]. A tree
+    compiled with idle trimming (``params.idle``) records the trimmed fragments: this is
+    then the demonstrated motion, without the waiting at fragment boundaries."""
     return float(sum(np.mean([s.t1 - s.t0 for s in e.sources]) for e in path if e.sources))
 
 
@@ -220,13 +225,15 @@ def episode(
     evaluate: Callable[[Sim], None] | None = None,
     drift: OdometryDrift | None = None,
     teach: TeachConfig | None = None,
+    speed: float = 1.0,
 ) -> EpisodeResult:
     """Run Algorithm 2 once on ``layout`` and score it. ``evaluate`` runs first thing after
     control (tests use it to re-enable object queries); ``drift``: a mobile base's odometry
     error (:class:`~smccli.world.sim.OdometryDrift`); ``teach``: where no SMC is
     contingent, an operator continues from there, the tree file grows from that node and
     execution goes on from where the taught chain ends (:mod:`smccli.execute.teach`; the
-    replay log holds the autonomous part before it)."""
+    replay log holds the autonomous part before it); ``speed``: every DMP that many times
+    faster (the caller checks it, :func:`~smccli.execute.executor.check_speed`)."""
     wall0 = time.perf_counter()
     sim = Sim(scene, layout, drift=drift)
     log = None
@@ -248,7 +255,12 @@ def episode(
 
         sensors = Sensors(sim, on_step=on_step)
         sensors.render_camera()  # the camera is running before the task starts (GL warm-up)
-        executor = TreeExecutor(tree, sensors, on_decision=None if log is None else log.on_decision)
+        executor = TreeExecutor(
+            tree,
+            sensors,
+            on_decision=None if log is None else log.on_decision,
+            speed=speed,
+        )
         t0 = sim.t
         outcome, reason, decisions, actions, path = executor.run()
         taught = None
@@ -257,7 +269,7 @@ def episode(
                 log.close()
                 log = None
             taught = run_teaching(sim, tree, executor.policy.nodes[0], teach, seed)
-            executor = TreeExecutor(load_tree(teach.tree_path), sensors)
+            executor = TreeExecutor(load_tree(teach.tree_path), sensors, speed=speed)
             outcome, reason, more_d, more_a, more_p = executor.run(start=taught.end)
             decisions, actions, path = decisions + more_d, actions + more_a, path + more_p
         duration = sim.t - t0
@@ -301,6 +313,7 @@ def episode(
         final_poses=verdict.final_poses,
         output=None if output is None else Path(output),
         taught=taught,
+        speed=speed,
     )
 
 
@@ -315,12 +328,15 @@ def run_episode(
     force: bool = False,
     drift: OdometryDrift | None = None,
     teach: TeachConfig | None = None,
+    speed: float = 1.0,
 ) -> EpisodeResult:
     """``smc replay TREE``: one episode on the layout file or the seed's layout (trial 0);
-    ``teach``: an operator continues where no SMC is contingent (``--teach``).
+    ``teach``: an operator continues where no SMC is contingent (``--teach``); ``speed``:
+    every DMP that many times faster (``--speed``).
 
-    Raises TreeError/SceneError (exit 2) for a bad tree or scene, OutputError before any
-    work when an output cannot be written (or exists without ``force``).
+    Raises TreeError/SceneError (exit 2) for a bad tree or scene, SmcError (exit 2) for a
+    speed beyond the tree's limit, OutputError before any work when an output cannot be
+    written (or exists without ``force``).
     """
     if output is not None and report is not None and Path(output) == Path(report):
         raise OutputError(f"{output}: given as both the replay log and the report")
@@ -328,6 +344,7 @@ def run_episode(
         if out is not None:
             check_output(out, force=force)
     t, sc = resolve(tree, scene)
+    check_speed(t, speed)
     if layout is None:
         lay = layout_for(sc, seed)
     elif isinstance(layout, dict):
@@ -336,7 +353,9 @@ def run_episode(
         lay = load_layout_file(Path(layout), sc)
     if teach is not None:
         check_teach(teach)
-    result = episode(t, sc, lay, seed=seed, output=output, force=force, drift=drift, teach=teach)
+    result = episode(
+        t, sc, lay, seed=seed, output=output, force=force, drift=drift, teach=teach, speed=speed
+    )
     result = replace(result, note=scene_note(t, sc))
     if report is not None:
         doc = {

@@ -17,6 +17,13 @@ the simulator's truth.
 
 The matching, the frontier and the goal mapping live in :mod:`smccli.execute.policy`; their
 names are re-exported here.
+
+Speed (``smc replay --speed F``): every DMP runs F times faster, its tau divided by F
+(:func:`at_speed`); the floors of a rollout's duration (:data:`MIN_DURATION`, the wrist's
+:data:`MAX_YAW_RATE`), the holds and the gripper's waits stay as they are. The robot files
+give no velocity limits, so the bound is the POI speed the controller tracks well,
+:data:`MAX_POI_SPEED`, against the fastest POI speed the tree's DMPs reach as demonstrated
+(:func:`speed_limit`); :func:`check_speed` refuses a factor beyond it.
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from smccli.errors import SmcError
 from smccli.execute.policy import (
     DURATION_CLIP,
     MAX_YAW_RATE,
@@ -44,6 +52,7 @@ from smccli.execute.policy import (
     match_edges,
 )
 from smccli.execute.sensing import Sensors
+from smccli.learn.dmp import Dmp, rollout
 from smccli.learn.tree import ROOT, Edge, Tree
 from smccli.perception import Cluster, scale_reading
 from smccli.perception.scan import align_scans, pose_to_se2, se2_to_pose
@@ -54,6 +63,7 @@ __all__ = [
     "CONTROL_OUTCOMES",
     "DURATION_CLIP",
     "MAX_HOLD",
+    "MAX_POI_SPEED",
     "MAX_YAW_RATE",
     "MIDWAY_PHASE",
     "MIN_DURATION",
@@ -65,8 +75,12 @@ __all__ = [
     "Decision",
     "EdgeStack",
     "TreeExecutor",
+    "at_speed",
+    "check_speed",
     "equivalent",
     "match_edges",
+    "peak_speed",
+    "speed_limit",
 ]
 
 CONTROL_OUTCOMES = ("success", "no_contingent_smc", "target_unreachable", "timeout")
@@ -86,6 +100,83 @@ RELOCALIZE_MIN_FITNESS = 0.3
 within ``inlier_distance`` of the stored scan (the robot still sees the stored place)."""
 RELOCALIZE_MAX_STEP = (0.3, 0.2)
 """Largest correction one alignment may make [m, rad]; a larger one is a wrong match."""
+MAX_POI_SPEED = 0.5
+"""Fastest POI speed a rollout may ask for at ``--speed`` above 1 [m/s]. The robot files
+give no velocity limits; the arm's controller caps joint targets at 2.5 rad/s, and on
+min-jerk moves of 25-32 cm the POI lags its target by 0.6-0.9 cm at a 0.5-0.6 m/s peak,
+1.0-1.5 cm at 0.8-1.0 m/s and 3-9 cm beyond 1.2 m/s (docs/choices.md, "Idle time and
+replay speed"): half the speed where tracking breaks down. A base's force caps saturate
+it at 1 m/s, and its servos lag 9 cm at 0.4 m/s: the same 0.5 m/s is its bound too."""
+
+# --- speed --------------------------------------------------------------------------------
+
+
+def peak_speed(dmp: Dmp) -> float:
+    """Fastest POI speed of ``dmp`` rolled out as demonstrated (start, goal, duration),
+    positions only [m/s]; 0 for a DMP without positions."""
+    if dmp.n_pos == 0:
+        return 0.0
+    t, y = rollout(dmp)
+    if len(t) < 2:
+        return 0.0
+    v = np.linalg.norm(np.diff(y[:, : dmp.n_pos], axis=0), axis=1) / np.diff(t)
+    return float(np.max(v))
+
+
+def _dmps(tree: Tree) -> list[tuple[str, Dmp]]:
+    out = []
+    for e in tree.edges:
+        a = e.smc.action
+        out.append((e.id, a.dmp))
+        if a.base_dmp is not None:
+            out.append((e.id, a.base_dmp))
+    return out
+
+
+def speed_limit(tree: Tree) -> tuple[float, str | None, float]:
+    """The largest ``--speed`` for ``tree``: (factor, the edge whose DMP is fastest, its
+    demonstrated peak speed [m/s]). The factor is at least 1 (the demonstrated speed was
+    executed by the same controller) and infinite for a tree without moves."""
+    worst, edge = 0.0, None
+    for eid, dmp in _dmps(tree):
+        v = peak_speed(dmp)
+        if v > worst:
+            worst, edge = v, eid
+    if worst <= 0:
+        return math.inf, None, 0.0
+    return max(1.0, MAX_POI_SPEED / worst), edge, worst
+
+
+def check_speed(tree: Tree, speed: float) -> None:
+    """SmcError (one line, exit 2) unless ``0 < speed <= speed_limit(tree)``."""
+    if not (math.isfinite(speed) and speed > 0):
+        raise SmcError(f"--speed must be a positive number, got {speed:g}")
+    if speed == 1.0:
+        return
+    limit, edge, v = speed_limit(tree)
+    if speed > limit + 1e-9:
+        raise SmcError(
+            f"--speed {speed:g} exceeds this tree's limit {limit:.2f}: SMC {edge} peaks at "
+            f"{v:.2f} m/s as demonstrated and the robot's POI is held to {MAX_POI_SPEED} m/s"
+        )
+
+
+def at_speed(tree: Tree, speed: float) -> Tree:
+    """``tree`` with every DMP ``speed`` times faster (tau / speed); the same tree at 1."""
+    if speed == 1.0:
+        return tree
+    if not speed > 0:
+        raise ValueError(f"at_speed: expected speed > 0, got {speed}")
+
+    def fast(d: Dmp) -> Dmp:
+        return replace(d, duration=d.duration / speed)
+
+    edges = []
+    for e in tree.edges:
+        a = e.smc.action
+        a = replace(a, dmp=fast(a.dmp), base_dmp=None if a.base_dmp is None else fast(a.base_dmp))
+        edges.append(replace(e, smc=replace(e.smc, action=a)))
+    return replace(tree, edges=tuple(edges))
 
 
 @dataclass(frozen=True, slots=True)
@@ -118,7 +209,8 @@ class TreeExecutor:
     the goal (:attr:`policy`, :meth:`TreePolicy.decide
     <smccli.execute.policy.TreePolicy.decide>`), stream the plan (:meth:`execute`) and
     advance the policy. ``on_decision`` (the replay log) observes each decision;
-    ``max_time`` bounds the sim time before a ``timeout`` stop [s].
+    ``max_time`` bounds the sim time before a ``timeout`` stop [s]; ``speed`` plays every
+    DMP that many times faster (:func:`at_speed`; :func:`check_speed` bounds it).
     """
 
     def __init__(
@@ -127,7 +219,9 @@ class TreeExecutor:
         sensors: Sensors,
         on_decision: Callable[[Decision, CameraFrame, np.ndarray], None] | None = None,
         max_time: float = 120.0,
+        speed: float = 1.0,
     ) -> None:
+        tree = at_speed(tree, speed)
         self.tree = tree
         self.params = tree.params
         self.sensors = sensors

@@ -2,7 +2,14 @@
 
 A tree records the parameters it was built with; compiling more logs into it with other
 parameters is refused unless the tree is rebuilt. ``--set KEY=VALUE`` overrides one value
-by its dotted path (``t_hp=0.12``, ``dmp.n_basis=50``).
+by its dotted path (``t_hp=0.12``, ``dmp.n_basis=50``, ``idle.trim=false``).
+
+A setting added after trees were written either has a default that means the old
+behaviour (``omit_default``: left out of the file at that default, so old trees keep their
+digest), or, when the new default changes what compile does, a ``legacy`` value: what a
+tree that lacks the key was built with. It is left out of the file at that value and
+filled in when the key is missing (``idle``: trees from before idle trimming load with
+``trim=False`` and keep their digest; new trees write their ``idle`` settings).
 """
 
 from __future__ import annotations
@@ -13,6 +20,7 @@ from typing import Any
 
 from smccli.errors import SmcError
 from smccli.learn.dmp import DmpParams
+from smccli.learn.trim import IdleParams
 from smccli.perception import PerceptionParams
 from smccli.perception.scan import ScanParams
 
@@ -47,6 +55,11 @@ class SmcParams:
     """Fragments shorter than this are dropped (e.g. the tail after the last mark) [s]."""
     auto_gap: float = 4.0
     """With ``--segment both``, automatic cuts only fill unmarked stretches longer than this [s]."""
+    idle: IdleParams = field(
+        default_factory=IdleParams, metadata={"legacy": IdleParams(trim=False)}
+    )
+    """Trimming of fragments' idle heads and tails (:mod:`smccli.learn.trim`); a tree
+    without this key was compiled untrimmed."""
     dmp: DmpParams = field(default_factory=DmpParams)
     """Movement primitive settings (eq. 27-28)."""
     perception: PerceptionParams = field(default_factory=PerceptionParams)
@@ -64,6 +77,8 @@ def params_to_dict(params: Any, *, full: bool = False) -> dict[str, Any]:
         v = getattr(params, f.name)
         if f.metadata.get("omit_default") and v == f.default and not full:
             continue
+        if "legacy" in f.metadata and v == f.metadata["legacy"] and not full:
+            continue
         if dataclasses.is_dataclass(v):
             out[f.name] = params_to_dict(v, full=full)
         elif isinstance(v, tuple):
@@ -74,12 +89,17 @@ def params_to_dict(params: Any, *, full: bool = False) -> dict[str, Any]:
 
 
 def params_from_dict(cls: type, data: dict[str, Any]) -> Any:
-    """Inverse of :func:`params_to_dict`; unknown keys are an error naming them."""
+    """Inverse of :func:`params_to_dict`; unknown keys are an error naming them, a missing
+    key with a ``legacy`` value takes that value, any other missing key its default."""
     names = {f.name: f for f in dataclasses.fields(cls)}
     unknown = sorted(set(data) - set(names))
     if unknown:
         raise SmcError(f"unknown parameter(s) {', '.join(unknown)}; valid: {', '.join(names)}")
-    kwargs: dict[str, Any] = {}
+    kwargs: dict[str, Any] = {
+        name: f.metadata["legacy"]
+        for name, f in names.items()
+        if name not in data and "legacy" in f.metadata
+    }
     defaults = cls()
     for name, value in data.items():
         current = getattr(defaults, name)

@@ -9,15 +9,21 @@ A mark is snapped to the *settled end* of a gripper or weight edge within ``snap
 a person presses the button a little early or late, and the decision point should be
 where the world has stopped changing (fingers closed, scale reading steady), since that
 is where perceptions are read and where replay will decide.
+
+Last, each fragment's idle head and tail are trimmed (:mod:`smccli.learn.trim`, settings
+``idle``): it then starts where its commands start moving and ends where they stop, so its
+DMP replays the motion and not the operator's waiting. Trimmed fragments no longer tile
+the log: a fragment starts at or after the previous one's end.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from enum import Enum
 
 import numpy as np
 
+from smccli.learn.trim import IdleParams, idle_centres, trim_interval
 from smccli.world.sensors import PoiCommand
 
 
@@ -39,6 +45,10 @@ class Fragment:
     """End t_j [s]: where the POI decides which perception is salient."""
     cause: str
     """What made the end boundary: ``operator``, ``gripper``, ``weight``, ``pause`` or ``end``."""
+    idle_head: float = 0.0
+    """Idle time trimmed before ``t0`` (the untrimmed fragment started that much earlier) [s]."""
+    idle_tail: float = 0.0
+    """Idle time trimmed after ``t1`` (the untrimmed boundary is ``t1 + idle_tail``) [s]."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,6 +73,9 @@ class Trace:
     """Operator saliency mark times [s]."""
     t_end: float
     """End of the log [s]."""
+    base: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    """A mobile manipulator's commanded base ``[x, y, yaw]``, shape (N, 3) [m, rad]; empty
+    (0, 3) for other robots."""
 
 
 def _settle_time(
@@ -162,13 +175,69 @@ def _one_event_per_window(edges: list[tuple[float, str]], window: float) -> list
 
 
 def segment(
-    trace: Trace, mode: SegmentMode, *, snap_window: float, min_fragment: float, auto_gap: float
+    trace: Trace,
+    mode: SegmentMode,
+    *,
+    snap_window: float,
+    min_fragment: float,
+    auto_gap: float,
+    idle: IdleParams | None = None,
 ) -> list[Fragment]:
     """Fragments of a demonstration, in time order (paper 3.1).
 
     The log's start opens the first fragment; each boundary closes one. Boundaries closer
     than ``min_fragment`` collapse into the later one. No boundary at all: one fragment.
+    Then each fragment's idle head and tail are trimmed (:func:`trim_idle`) with ``idle``
+    (default :class:`~smccli.learn.trim.IdleParams`; ``trim=False`` keeps them).
     """
+    return trim_idle(
+        trace,
+        _boundaries(
+            trace, mode, snap_window=snap_window, min_fragment=min_fragment, auto_gap=auto_gap
+        ),
+        IdleParams() if idle is None else idle,
+        min_fragment,
+    )
+
+
+def trim_idle(
+    trace: Trace, fragments: list[Fragment], idle: IdleParams, min_fragment: float
+) -> list[Fragment]:
+    """``fragments`` with their idle heads and tails cut off (:mod:`smccli.learn.trim`),
+    each kept at least ``min_fragment`` long; unchanged when ``idle.trim`` is False. A
+    mobile manipulator's (``trace.base``) keep their heads: their start is where its slow
+    sensors recorded the decision point."""
+    if not idle.trim or len(trace.t_cmd) < 3:
+        return fragments
+    t = trace.t_cmd
+    base = trace.base if len(trace.base) == len(t) else None
+    # A mobile manipulator's scenes run a slow camera and lidar that record at the
+    # decision points (scene camera ``at_marks``), where compile perceives: its fragments
+    # keep their start and lose only their idle tails.
+    heads = base is None
+    out = []
+    for f in fragments:
+        # Windows end at the fragment's ends: the next fragment's first move must not make
+        # this one's idle tail look busy.
+        sel = np.nonzero((t >= f.t0 - 1e-9) & (t <= f.t1 + 1e-9))[0]
+        still = idle_centres(
+            t[sel],
+            trace.target[sel],
+            trace.gripper_cmd[sel],
+            None if base is None else base[sel],
+            idle,
+        )
+        m0, m1 = trim_interval(t[sel], still, f.t0, f.t1, idle, min_fragment)
+        m0 = m0 if heads else f.t0
+        out.append(replace(f, t0=m0, t1=m1, idle_head=m0 - f.t0, idle_tail=f.t1 - m1))
+    return out
+
+
+def _boundaries(
+    trace: Trace, mode: SegmentMode, *, snap_window: float, min_fragment: float, auto_gap: float
+) -> list[Fragment]:
+    """The untrimmed fragments of :func:`segment`: they tile the log from 0 to the last
+    boundary."""
     edges = _one_event_per_window(
         sorted(
             [(t, "gripper") for t in gripper_edges(trace)]
@@ -227,6 +296,8 @@ def trace_from_commands(
 ) -> Trace:
     """Assemble a :class:`Trace` from decoded log messages."""
     t_cmd = np.array([c.t for c in commands], dtype=float)
+    bases = [c.base for c in commands]
+    has_base = bool(bases) and all(b is not None for b in bases)
     return Trace(
         t_cmd=t_cmd,
         gripper_cmd=np.array([c.gripper for c in commands], dtype=float),
@@ -237,4 +308,5 @@ def trace_from_commands(
         weight=np.asarray(weight, dtype=float),
         marks=tuple(sorted(marks)),
         t_end=float(t_end),
+        base=np.array(bases, dtype=float).reshape(-1, 3) if has_base else np.zeros((0, 3)),
     )
