@@ -631,8 +631,8 @@ WORKER_ENV = {"OPENBLAS_THREAD_TIMEOUT": "4"}
 """Environment of the worker processes, where the user has not set it. OpenBLAS's idle
 threads spin for 2**28 cycles (~0.1 s) after every call before they sleep; with a worker
 per core, each one's spinning threads take the others' cores (20 demos: 12.5 s instead of
-6.5 s on 2 cores). With 2**4 they sleep at once. The thread count, which decides how a
-product is split and so its last bits (DMP weights), stays the parent's."""
+6.5 s on 2 cores). With 2**4 they sleep at once. The DMP fit runs on one BLAS thread
+wherever it runs (smccli/learn/dmp.py), so the tree does not depend on the thread count."""
 
 
 @contextlib.contextmanager

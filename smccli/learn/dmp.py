@@ -33,6 +33,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from scipy.linalg import expm
+from threadpoolctl import threadpool_limits
 
 from smccli.errors import LogError, TreeError
 
@@ -201,9 +202,14 @@ def fit(
     # derivative of a noisy demonstration and matches the rollout's start from rest.
     e = c - np.outer(_min_jerk(s), c[-1])
     g = _integrate(np.eye(params.n_basis), params, s)
-    gram = g.T @ g
-    lam = params.ridge * np.trace(gram) / params.n_basis
-    w = np.linalg.solve(gram + lam * np.eye(params.n_basis), g.T @ e)
+    # One BLAS thread: OpenBLAS splits a product and a solve by its thread count, which
+    # changes the weights' last bits (measured: from the 8th digit), so a tree would depend
+    # on the machine's cores and on OPENBLAS_NUM_THREADS (Dask sets it to 1 in the
+    # process that starts its workers). One thread is no slower at this size (n_basis^2).
+    with threadpool_limits(limits=1, user_api="blas"):
+        gram = g.T @ g
+        lam = params.ridge * np.trace(gram) / params.n_basis
+        w = np.linalg.solve(gram + lam * np.eye(params.n_basis), g.T @ e)
     return Dmp(w.T.copy(), start.copy(), goal.copy(), duration, n_pos, params)
 
 
