@@ -66,9 +66,13 @@ sample-logs: setup
 viewer-shots: setup
 	$(PY) -m smccli.bench.viewer
 
+# Each writes docs/bench_*.json naming the commit it ran at; paper.py runs the paper's 5.1
+# under ideal and realistic sensors, with clutter and with a moving target (about an hour).
 bench: setup
 	$(PY) -m smccli.bench.record
 	$(PY) -m smccli.bench.compile
+	$(PY) -m smccli.bench.throughput
+	$(PY) -m smccli.bench.duration
 	$(PY) -m smccli.bench.paper
 	$(PY) -m smccli.bench.rooms
 	$(PY) -m smccli.bench.cluster
