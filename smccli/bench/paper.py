@@ -305,7 +305,7 @@ def _strip(summary: dict[str, Any]) -> dict[str, Any]:
     s = dict(summary)
     s["trial_results"] = [
         {k: t[k] for k in ("index", "outcome", "success", "distance", "yaw_distance", "duration")}
-        | {"white_box_xy": t["layout"]["white_box"][:2]}
+        | ({"white_box_xy": t["layout"]["white_box"][:2]} if "white_box" in t["layout"] else {})
         for t in summary["trial_results"]
     ]
     s["failed_trials"] = [
@@ -375,6 +375,12 @@ def main(argv: list[str] | None = None) -> int:
         fig10(summary, args.out / "img", "bench"),
     ]
     results["bench_pick"] = _strip(summary)
+    path = args.out / "bench_results.json"
+
+    def save() -> None:
+        """Write what is measured so far: a crash later loses no campaign."""
+        write_atomic(path, json.dumps(results, indent=1, allow_nan=False) + "\n")
+
     bands = [b for b in summary["by_band"] if b["trials"]]
     results["targets"] = {
         "success_rate>=0.99": summary["success_rate"] >= 0.99,
@@ -383,6 +389,7 @@ def main(argv: list[str] | None = None) -> int:
         "latency_p50<100ms": results["latency_serial_ms"]["p50"] < 100,
         "match_1000<1ms": results["match_1000_edges"]["vectorised_ms_p50"] < 1.0,
     }
+    save()
 
     def campaign(scene_name: str, trials: int) -> dict[str, Any]:
         _log(f"compiling {scene_name}'s demonstrations")
@@ -415,6 +422,7 @@ def main(argv: list[str] | None = None) -> int:
         results["targets"][f"{variant}_every_band>=0.97"] = all(
             b["success_rate"] >= 0.97 for b in vb
         )
+        save()
 
     others = [("bench_pick_panda", args.panda_trials)]
     others += [(name, args.side_trials) for name in ("pick_place", "weigh_sort")]
@@ -427,10 +435,9 @@ def main(argv: list[str] | None = None) -> int:
             results["figures"] += plots(s, args.out / "img", "bench_panda")
         results[scene_name] = _strip(s)
         results["targets"][f"{scene_name}>=0.99"] = s["success_rate"] >= 0.99
+        save()
     results["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S")
-    args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / "bench_results.json"
-    write_atomic(path, json.dumps(results, indent=1, allow_nan=False) + "\n")
+    save()
     b = results["bench_pick"]
     print(
         f"bench_pick: {b['successes']}/{b['trials']} = {100 * b['success_rate']:.2f} % "
