@@ -375,11 +375,11 @@ def main(argv: list[str] | None = None) -> int:
         fig10(summary, args.out / "img", "bench"),
     ]
     results["bench_pick"] = _strip(summary)
-    path = args.out / "bench_results.json"
+    results_file = args.out / "bench_results.json"
 
     def save() -> None:
         """Write what is measured so far: a crash later loses no campaign."""
-        write_atomic(path, json.dumps(results, indent=1, allow_nan=False) + "\n")
+        write_atomic(results_file, json.dumps(results, indent=1, allow_nan=False) + "\n")
 
     bands = [b for b in summary["by_band"] if b["trials"]]
     results["targets"] = {
@@ -403,17 +403,17 @@ def main(argv: list[str] | None = None) -> int:
 
     noisy_tree = noisy_demo_tree(args.work) if args.variant_trials > 0 else Path()
     for variant in VARIANTS if args.variant_trials > 0 else ():
-        path = VARIANT_DIR / variant / "scene.yaml"
-        _log(f"{variant}: the tree of the realistic demonstration in {path}")
+        scene_file = VARIANT_DIR / variant / "scene.yaml"
+        _log(f"{variant}: the tree of the realistic demonstration in {scene_file}")
         s = cp.run_campaign(
             noisy_tree,
-            scene=path,
+            scene=scene_file,
             trials=args.variant_trials,
             seed=args.seed,
             workers=args.workers,
             on_trial=_progress(variant, args.variant_trials),
         )
-        s["profile"] = resolve(noisy_tree, path)[1].noise.profile
+        s["profile"] = resolve(noisy_tree, scene_file)[1].noise.profile
         results["figures"] += plots(s, args.out / "img", variant)
         results["figures"].append(fig10(s, args.out / "img", variant))
         results[variant] = _strip(s)
@@ -458,7 +458,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"{100 * s['success_rate']:.1f} %, failures "
                 f"{ {k: v for k, v in s['failures'].items() if v} }"
             )
-    print(f"wrote {path}")
+    print(f"wrote {results_file}")
     return 0
 
 
