@@ -198,7 +198,21 @@ def _cut_in_first_chunk(folder: Path) -> tuple[Path, list[str]]:
     return path, ["no readable message (truncated at byte", "before its first chunk ended"]
 
 
+def _zstd_frame_claims_terabytes(folder: Path) -> tuple[Path, list[str]]:
+    """A chunk whose zstd frame header claims 32 TiB of content (a fuzzed log found it):
+    zstandard tries to allocate that and raises MemoryError."""
+    data = bytearray(SAMPLE.read_bytes())
+    i = data.index(b"\x28\xb5\x2f\xfd")  # the first zstd frame's magic
+    data[i + 4] = 0xC0  # frame header: an 8-byte content size after the window byte
+    data[i + 5] = 0x60
+    data[i + 6 : i + 14] = (2**45).to_bytes(8, "little")
+    path = folder / "bad.mcap"
+    path.write_bytes(bytes(data))
+    return path, ["corrupt MCAP (a zstd chunk claims more data than memory holds)"]
+
+
 CASES = [
+    Case("zstd-frame-claims-terabytes", _zstd_frame_claims_terabytes),
     message_case(
         "command-missing-field",
         tp.COMMAND,

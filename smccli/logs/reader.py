@@ -265,6 +265,10 @@ def _scan(path: Path, data: bytes) -> _Raw:
         raise LogError(f"{path}: corrupt MCAP (record length out of range)") from None
     except RuntimeError as e:  # how lz4.frame reports a corrupt lz4 chunk
         raise LogError(f"{path}: corrupt MCAP (lz4 chunk: {e})") from None
+    except MemoryError:  # zstandard allocates what a damaged frame header claims
+        raise LogError(
+            f"{path}: corrupt MCAP (a zstd chunk claims more data than memory holds)"
+        ) from None
     if not footer:
         raw.truncated = True
         raw.cut_at = stream.tell()
