@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from smccli.world.controller import (
+    TRACKED,
     CartesianController,
     reachable,
     rotation_error,
@@ -175,8 +176,12 @@ class _Reference:
         target = np.asarray(target, dtype=float)
         q = self.q
         budget = self.c.max_step
-        for _ in range(self.c.iterations):
-            q_new = self.ik_step(q, self.yaw_subgoal(q, target), budget)
+        for i in range(self.c.iterations):
+            sub = self.yaw_subgoal(q, target)
+            e = self.error(q, sub)  # the stopping rule is the controller's, not the solve's
+            if i and np.linalg.norm(e[:3]) < TRACKED[0] and np.linalg.norm(e[3:]) < TRACKED[1]:
+                break
+            q_new = self.ik_step(q, sub, budget)
             budget -= float(np.max(np.abs(q_new - q)))
             q = q_new
             if budget <= 1e-9:

@@ -168,3 +168,23 @@ def test_the_teleop_marker_changes_neither_physics_nor_camera() -> None:
     assert np.array_equal(plain.data.qpos, marked.data.qpos)
     a, b = plain.render_camera(), marked.render_camera()
     assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.depth, b.depth)
+
+
+def test_reset_puts_back_what_a_layout_moved_in_the_model() -> None:
+    """A layout moves furniture and fixed objects in the model itself (static bodies):
+    a reset for a layout that leaves the wardrobe out is the simulator built for it, the
+    wardrobe back at its scene pose (campaign workers reset one simulator per trial)."""
+    scene = load_scene("loco_manip")
+    moved = nominal_layout(scene)
+    x, y, z, yaw = moved["wardrobe"]
+    moved["wardrobe"] = [x + 0.05, y - 0.05, z, yaw + 0.08]
+    without = {k: v for k, v in nominal_layout(scene).items() if k != "wardrobe"}
+    sim, fresh = Sim(scene, moved), Sim(scene, without)
+    assert not np.array_equal(sim.model.body_pos, fresh.model.body_pos)
+    sim.reset(without)
+    np.testing.assert_array_equal(sim.model.body_pos, fresh.model.body_pos)
+    np.testing.assert_array_equal(sim.model.body_quat, fresh.model.body_quat)
+    np.testing.assert_array_equal(sim.data.qpos, fresh.data.qpos)
+    np.testing.assert_array_equal(sim.render_camera().depth, fresh.render_camera().depth)
+    sim.close()
+    fresh.close()

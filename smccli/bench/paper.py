@@ -121,7 +121,7 @@ def serial_latency(tree: Tree, scene: Scene, n: int = 20, seed: int = 99) -> dic
         sim = Sim(scene, layout_for(scene, seed, i))
         try:
             ctl = TreeExecutor(tree, Sensors(sim))
-            sim.render_camera()  # GL warm-up, as an episode does
+            sim.start_camera()  # GL warm-up, as an episode does
             dec, *_ = ctl.decide((ROOT,))
             per.append(1e3 * dec.perceive_s)
             mat.append(1e3 * dec.match_s)

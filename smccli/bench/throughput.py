@@ -1,12 +1,14 @@
 """Campaign throughput on bench_pick: ``python -m smccli.bench.throughput``.
 
-The sample ``bench_pick`` tree, ``--trials`` (40) trials with ``--seed`` (0), run with each
-of ``--workers`` (1 2) local processes, as ``smc replay TREE --trials 40 --workers W --seed
+The sample ``bench_pick`` tree, ``--trials`` (200) trials with ``--seed`` (0), run with each
+of ``--workers`` (1 2) local processes, as ``smc replay TREE --trials 200 --workers W --seed
 0`` does. Per worker count: wall time and trials/s (the campaign's own, without imports or
-compiling the tree), trials/s per worker, and the CPU time the campaign used (this process
-and its workers) with trials per CPU second: on a machine shared with other jobs the wall
-time says as much about them as about smc, the CPU time much less. Every run must give the
-same outcomes (``workers`` changes nothing but the wall time), else exit 1.
+compiling the tree, but with starting the workers), trials/s per worker, the CPU time the
+campaign used (this process and its workers) with trials per CPU second, and the median
+trial's wall time inside its worker (a running worker's pace: the rate per core). On a
+machine shared with other jobs the wall time says as much about them as about smc, the
+CPU time much less. Every run must give the same outcomes (``workers`` changes nothing but
+the wall time), else exit 1.
 
 Writes ``docs/bench_throughput.json`` (``--out``).
 """
@@ -20,6 +22,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import argparse  # noqa: E402
 import json  # noqa: E402
 import resource  # noqa: E402
+import statistics  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -41,7 +44,7 @@ def _cpu_s() -> float:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--trials", type=int, default=40)
+    ap.add_argument("--trials", type=int, default=200)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--out", type=Path, default=REPO / "docs" / "bench_throughput.json")
@@ -58,6 +61,7 @@ def main(argv: list[str] | None = None) -> int:
             cpu0 = _cpu_s()
             s = run_campaign(tree, trials=args.trials, seed=args.seed, workers=n)
             cpu = _cpu_s() - cpu0
+            trial_s = float(statistics.median(r["wall_time"] for r in s["trial_results"]))
             outcomes = [(r["index"], r["outcome"]) for r in s["trial_results"]]
             reference = reference or outcomes
             if outcomes != reference:
@@ -73,6 +77,8 @@ def main(argv: list[str] | None = None) -> int:
                     "trials_per_second_per_worker": s["trials_per_second"] / n,
                     "cpu_s": cpu,
                     "trials_per_cpu_second": args.trials / cpu,
+                    "trial_wall_s_p50": trial_s,
+                    "trials_per_second_per_core_running": 1.0 / trial_s,
                     "load_average_before": load,
                 }
             )
@@ -80,6 +86,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"{n} workers: {s['successes']}/{args.trials}, {s['wall_s']:.1f} s wall, "
                 f"{s['trials_per_second']:.2f} trials/s ({s['trials_per_second'] / n:.2f} per "
                 f"worker), {cpu:.1f} s CPU ({args.trials / cpu:.2f} trials per CPU s), "
+                f"median trial {trial_s:.3f} s ({1 / trial_s:.2f} trials/s per core running), "
                 f"load before {load:.1f}",
                 flush=True,
             )

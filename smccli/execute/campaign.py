@@ -2,10 +2,13 @@
 
 Trial ``i`` of a campaign with seed ``S`` runs on ``sample_layout(scene,
 np.random.default_rng([S, i]))``, so a campaign gives the same layouts and the same results
-whatever the number of workers (each trial is a fresh simulation; perception and control are
-deterministic). Workers are processes of the ``spawn`` context: EGL contexts do not survive
-``fork``; or the workers of an existing Dask cluster (``cluster``: its scheduler's
-address), each trial one task. Campaigns write no replay log and render only at decision
+whatever the number of workers (each trial starts from the state a fresh simulation has:
+a worker keeps one simulator and resets it; perception and control are deterministic).
+A trial runs on one thread of BLAS and OpenMP: the workers are the parallelism, and idle
+library threads spinning beside them took a quarter of a trial's CPU (measured). Workers
+are processes of the ``spawn`` context: EGL contexts do not survive ``fork``; or the
+workers of an existing Dask cluster (``cluster``: its scheduler's address), each trial one
+task. Campaigns write no replay log and render only at decision
 points.
 
 Statistics: success rate with a Wilson 95 % interval; success by distance band of the
@@ -23,6 +26,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import json  # noqa: E402
 import math  # noqa: E402
 import multiprocessing as mp  # noqa: E402
+import threading  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable, Iterator, Sequence  # noqa: E402
 from dataclasses import asdict, dataclass  # noqa: E402
@@ -31,6 +35,7 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 from scipy.stats import binomtest  # noqa: E402
+from threadpoolctl import threadpool_limits  # noqa: E402
 
 from smccli.errors import SmcError  # noqa: E402
 from smccli.execute.episode import episode, layout_for, resolve, scene_note  # noqa: E402
@@ -39,7 +44,7 @@ from smccli.execute.executor import check_speed  # noqa: E402
 from smccli.learn.tree import Tree, digest  # noqa: E402
 from smccli.outputs import check_output, write_atomic  # noqa: E402
 from smccli.world.scene import ROBOT_KEY, Scene  # noqa: E402
-from smccli.world.sim import OdometryDrift  # noqa: E402
+from smccli.world.sim import OdometryDrift, Sim  # noqa: E402
 
 BANDS = (0.0, 0.05, 0.10, 0.15, 0.20, 0.25, 0.30, math.inf)
 """Edges of the distance bands [m] (paper Fig. 11 uses rings around the demonstrated pose)."""
@@ -94,6 +99,41 @@ class TrialResult:
     """Object poses at the start."""
 
 
+class SimCache:
+    """One simulator per thread, reset for each trial (its model, data and renderer are
+    built once): :meth:`get` gives the calling thread's for a scene and drift, building it
+    the first time or when they change. Threads matter on a Dask worker, which runs tasks
+    on several; a GL context belongs to the thread that made it."""
+
+    def __init__(self) -> None:
+        self._local = threading.local()
+        self._all: list[Sim] = []
+        self._lock = threading.Lock()
+
+    def get(self, scene: Scene, drift: OdometryDrift | None) -> Sim:
+        sim: Sim | None = getattr(self._local, "sim", None)
+        if sim is not None and sim.scene is scene and sim.drift == drift:
+            return sim
+        if sim is not None:
+            sim.close()
+        sim = self._local.sim = Sim(scene, drift=drift)
+        with self._lock:
+            self._all.append(sim)
+        return sim
+
+    def close(self) -> None:
+        """Free every simulator's renderer (call from the thread that used them)."""
+        with self._lock:
+            for sim in self._all:
+                sim.close()
+            self._all.clear()
+        self._local = threading.local()
+
+
+_SIMS = SimCache()
+"""This process's simulators (pool and Dask workers keep theirs between trials)."""
+
+
 def run_trial(
     tree: Tree,
     scene: Scene,
@@ -101,11 +141,15 @@ def run_trial(
     index: int,
     drift: OdometryDrift | None = None,
     speed: float = 1.0,
+    sims: SimCache | None = None,
 ) -> TrialResult:
     """Trial ``index`` of the campaign with ``seed``, its DMPs ``speed`` times faster; the
-    distance bands are over the manipulated object's start, or a mobile base's."""
+    distance bands are over the manipulated object's start, or a mobile base's. The
+    simulator comes from ``sims`` (default: this process's)."""
     layout = layout_for(scene, seed, index)
-    r = episode(tree, scene, layout, seed=seed, drift=drift, speed=speed)
+    sim = (sims or _SIMS).get(scene, drift)
+    with threadpool_limits(limits=1):
+        r = episode(tree, scene, layout, seed=seed, drift=drift, speed=speed, sim=sim)
     obj = r.manipulated
     dist = yaw = 0.0
     if scene.start is not None and ROBOT_KEY in layout:
@@ -239,8 +283,12 @@ def run_trials(
         for res in _cluster_trials(tree, scene, seed, drift, todo, cluster, speed):
             done(res)
     elif workers <= 1 or len(todo) <= 1:
-        for i in todo:
-            done(run_trial(tree, scene, seed, i, drift, speed))
+        sims = SimCache()  # this process's: freed when the campaign ends
+        try:
+            for i in todo:
+                done(run_trial(tree, scene, seed, i, drift, speed, sims))
+        finally:
+            sims.close()
     else:
         ctx = mp.get_context("spawn")
         with ctx.Pool(

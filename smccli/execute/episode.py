@@ -226,6 +226,7 @@ def episode(
     drift: OdometryDrift | None = None,
     teach: TeachConfig | None = None,
     speed: float = 1.0,
+    sim: Sim | None = None,
 ) -> EpisodeResult:
     """Run Algorithm 2 once on ``layout`` and score it. ``evaluate`` runs first thing after
     control (tests use it to re-enable object queries); ``drift``: a mobile base's odometry
@@ -233,9 +234,18 @@ def episode(
     contingent, an operator continues from there, the tree file grows from that node and
     execution goes on from where the taught chain ends (:mod:`smccli.execute.teach`; the
     replay log holds the autonomous part before it); ``speed``: every DMP that many times
-    faster (the caller checks it, :func:`~smccli.execute.executor.check_speed`)."""
+    faster (the caller checks it, :func:`~smccli.execute.executor.check_speed`); ``sim``:
+    a simulator of ``scene`` with ``drift`` to reset and keep open, instead of building
+    one (campaign workers keep theirs: its renderer's GL context and the compiled model
+    are most of a trial's setup; a reset gives the state a new simulator would)."""
     wall0 = time.perf_counter()
-    sim = Sim(scene, layout, drift=drift)
+    own = sim is None
+    if sim is None:
+        sim = Sim(scene, layout, drift=drift)
+    else:
+        if sim.scene is not scene or sim.drift != drift:
+            raise ValueError("episode: the simulator given runs another scene or drift")
+        sim.reset(layout)
     log = None
     touched: set[str] = set()
     slips = HandleWatch(scene.doors)
@@ -254,7 +264,7 @@ def episode(
                 log.on_step(cmd)
 
         sensors = Sensors(sim, on_step=on_step)
-        sensors.render_camera()  # the camera is running before the task starts (GL warm-up)
+        sim.start_camera()  # the camera is running before the task starts (GL warm-up)
         executor = TreeExecutor(
             tree,
             sensors,
@@ -284,7 +294,8 @@ def episode(
             log.abort()
         raise
     finally:
-        sim.close()
+        if own:
+            sim.close()
     # --- evaluation: control is over, the simulator may be read ---
     if evaluate is not None:
         evaluate(sim)

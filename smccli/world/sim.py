@@ -183,6 +183,11 @@ class Sim:
         self._renderer: mujoco.Renderer | None = None
         self._robot: RobotModel | None = None
         self._last = PoiCommand(0.0, np.zeros(4), 1.0)
+        # A layout moves static bodies in the model itself: reset starts from these, so a
+        # simulator reset for a new layout is the one built for it (campaign workers keep
+        # theirs).
+        self._body_pos0 = m.body_pos.copy()
+        self._body_quat0 = m.body_quat.copy()
         self.reset(layout, base_pose)
 
     def _id(self, kind: mujoco.mjtObj, name: str) -> int:
@@ -207,6 +212,8 @@ class Sim:
         (:mod:`smccli.world.noise`) are drawn with ``noise_seed`` (default: from the
         layout, so a campaign's trials differ and each is reproducible)."""
         m, d = self.model, self.data
+        m.body_pos[:] = self._body_pos0
+        m.body_quat[:] = self._body_quat0
         mujoco.mj_resetData(m, d)
         if layout is None:
             # A scene with variants has look-alike objects sharing a nominal pose: show one.
@@ -438,6 +445,27 @@ class Sim:
 
     def render_camera(self) -> CameraFrame:
         """RGB and metric depth (along the optical axis) from the scene's sensor camera."""
+        rgb, depth = self._render()
+        frame = CameraFrame(
+            t=self.t,
+            rgb=rgb,
+            depth=depth,
+            K=self.camera_matrix(),
+            T_world_camera=self.camera_pose(),
+            frame_id="camera",
+        )
+        return self.sensor_noise.frame(frame)
+
+    def start_camera(self) -> None:
+        """Build the camera's renderer and render one frame, discarded, unless it runs
+        already: a GL context's first frames are slow (shaders, buffers), and a decision's
+        latency should not include them. Draws no sensor noise, so an episode's readings do
+        not depend on whether its simulator is new or reset."""
+        if self._renderer is None:
+            self._render()
+
+    def _render(self) -> tuple[np.ndarray, np.ndarray]:
+        """RGB (h, w, 3) uint8 and depth (h, w) float32 [m], 0 where nothing is seen."""
         cam = self.scene.camera
         if self._renderer is None:
             self._renderer = mujoco.Renderer(self.model, cam.height, cam.width)
@@ -451,6 +479,9 @@ class Sim:
         opt.sitegroup[:] = 0  # sites (the POI marker) are not seen by a real camera
         r.update_scene(self.data, camera=self._cam_id, scene_option=opt)
         rgb = r.render().copy()
+        # Depth is a second pass: mujoco.Renderer draws it with segmentation colours, and
+        # its depth then differs from the lit pass's by about 1 mm at the table (measured);
+        # logs hold the segmented pass's, so replay must perceive the same.
         r.enable_depth_rendering()
         r.update_scene(self.data, camera=self._cam_id, scene_option=opt)
         # mujoco.Renderer already linearises the depth buffer to metres along the optical
@@ -459,15 +490,7 @@ class Sim:
         r.disable_depth_rendering()
         far = self.model.vis.map.zfar * self.model.stat.extent
         depth[depth >= 0.999 * far] = 0.0
-        frame = CameraFrame(
-            t=self.t,
-            rgb=rgb,
-            depth=depth,
-            K=self.camera_matrix(),
-            T_world_camera=self.camera_pose(),
-            frame_id="camera",
-        )
-        return self.sensor_noise.frame(frame)
+        return rgb, depth
 
     def camera_matrix(self) -> np.ndarray:
         """Pinhole intrinsics from the camera's vertical field of view, shape (3, 3) [px].
