@@ -476,7 +476,21 @@ def replay(
     if teach is not None:
         if trials > 0:
             raise SmcError("--teach continues one episode; it does not go with --trials")
-        teach_cfg = TeachConfig(tree_path=tree, operator=teach, script=script)
+        next_line = [1.0]
+
+        def teach_status(s) -> None:
+            # A plain line per simulated second of teaching (the viewer's HUD shows it too).
+            if s.t >= next_line[0]:
+                err.print(f"teaching: sim {s.t:6.2f} s  marks {s.marks}", highlight=False)
+                next_line[0] = s.t + 1.0
+
+        teach_cfg = TeachConfig(
+            tree_path=tree,
+            operator=teach,
+            script=script,
+            on_message=lambda m: err.print(escape(m)),
+            on_status=teach_status,
+        )
     elif script is not None:
         raise SmcError("--script is the continuation of --teach script")
     drift = OdometryDrift(odometry_drift, odometry_drift) if odometry_drift > 0 else None

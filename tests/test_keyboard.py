@@ -2,10 +2,13 @@
 
 The mobile base's driving (speeds, body frame, release, lead clamp) is also checked without
 a viewer, through :class:`BaseDriver` on the simulator, tick by tick in simulated time.
+``smc replay --teach keyboard`` (an operator continues where the tree stops) is driven the
+same way.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import queue
@@ -20,7 +23,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import SAMPLE_LOGS
 
+from smccli.execute.episode import layout_for
+from smccli.learn.compile import compile_logs
+from smccli.learn.tree import ROOT, digest, load_tree
 from smccli.logs import read_log
 from smccli.record.keyboard import (
     HOLD_S,
@@ -529,3 +536,59 @@ def test_mobile_manipulator_switches_base_and_arm_with_tab(tmp_path, display):
     # The hand stepped while the base stood (arm mode): its target stays within the 3 mm
     # the driver lets it settle by.
     assert np.ptp(base[moved[0] :, 0]) < 3e-3
+
+
+@pytest.mark.viewer
+def test_replay_teach_keyboard_continues_where_the_tree_stops(tmp_path, display):
+    """``smc replay TREE --teach keyboard``: a pick_place tree taught only the cube stops
+    at the root on a layout with the pyramid; the viewer opens on that state, the keys
+    move the hand from where the robot stands (two marks, Enter), and the tree grows from
+    the root by the taught log, its version one up and its history naming the node."""
+    tree = tmp_path / "tree.json"
+    compile_logs([SAMPLE_LOGS / "pick_place" / "demo1.mcap"], tree)  # the cube only
+    before = load_tree(tree)
+    scene = load_scene("pick_place")
+    layout = next(lay for i in range(100) if "grey_pyramid" in (lay := layout_for(scene, 7, i)))
+    layout_file = tmp_path / "layout.json"
+    layout_file.write_text(json.dumps({k: list(v) for k, v in layout.items()}))
+    env = {**os.environ, "DISPLAY": display, "MUJOCO_GL": "glfw"}
+    cmd = [sys.executable, "-m", "smccli.cli", "replay", str(tree), "--layout", str(layout_file)]
+    proc = subprocess.Popen(
+        [*cmd, "--teach", "keyboard"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    err = Stderr(proc)
+    try:
+        err.wait_for("no contingent SMC at n0: the keyboard operator continues from here")
+        err.wait_for("keyboard operator ready")
+        win = _window(env)
+        _focus(env, win)
+        _keys(env, win, "Up", "Up", "Up")
+        time.sleep(1.0)
+        _keys(env, win, "m", *("Page_Down",) * 4)
+        time.sleep(1.0)
+        _keys(env, win, "m", "Return")
+        proc.wait(timeout=120)
+        stdout = proc.stdout.read() if proc.stdout else ""
+        stderr = err.rest()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert "taught at n0" in stdout, stdout + stderr
+    taught = read_log(tmp_path / "tree_taught_n0_000.mcap")
+    assert taught.metadata["teach_node"] == ROOT
+    assert taught.metadata["teach_tree_digest"] == digest(before)
+    # The keys stepped the target from where the hand stood: 3 cm along x, then 4 cm down.
+    first, last = taught.commands[0], taught.commands[-1]
+    np.testing.assert_allclose(first.target[:3], np.asarray(taught.poi[0])[:3], atol=0.005)
+    np.testing.assert_allclose(last.target[:3] - first.target[:3], [0.03, 0, -0.04], atol=1e-6)
+    assert len(taught.marks) == 2
+
+    after = load_tree(tree)
+    assert after.version == before.version + 1
+    assert after.history[-1]["logs"][0]["at"] == ROOT
+    new = [e for e in after.edges if e.sources[0].log == "tree_taught_n0_000.mcap"]
+    assert new and new[0].parent == ROOT and len(after.children(ROOT)) == 2

@@ -9,13 +9,14 @@ autonomously from where the taught chain ends.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 from smccli.errors import SmcError
 from smccli.learn.compile import compile_logs
 from smccli.learn.tree import Tree, digest
-from smccli.record.session import RecordConfig, record_session
+from smccli.record.session import RecordConfig, RecordStatus, record_session
 from smccli.world.sim import Sim
 
 
@@ -31,6 +32,10 @@ class TeachConfig:
     """Teleop script of the continuation (``script``)."""
     log: Path | None = None
     """The taught log; default: beside the tree, ``<tree>_taught_<node>_<k>.mcap``."""
+    on_message: Callable[[str], None] | None = None
+    """Told where teaching starts and, for the keyboard, the keys once the viewer is up."""
+    on_status: Callable[[RecordStatus], None] | None = None
+    """The recording's progress, every few ticks (as ``smc record``'s)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,12 +86,17 @@ def teach(sim: Sim, tree: Tree, node: str, cfg: TeachConfig, seed: int = 0) -> T
     from smccli.record.keyboard import KeyboardOperator
     from smccli.record.operators import ScriptOperator, load_script
 
+    if cfg.on_message is not None:
+        cfg.on_message(
+            f"no contingent SMC at {node}: the {cfg.operator} operator continues from here, "
+            f"recording {out}"
+        )
     operator: ScriptOperator | KeyboardOperator
     if cfg.operator == "script":
         assert cfg.script is not None
         operator = ScriptOperator(load_script(cfg.script), sim, seed=seed)
     else:
-        operator = KeyboardOperator(sim)
+        operator = KeyboardOperator(sim, on_ready=cfg.on_message)
     extra = {
         "teach_tree": Path(cfg.tree_path).name,
         "teach_tree_digest": digest(tree),
@@ -96,7 +106,7 @@ def teach(sim: Sim, tree: Tree, node: str, cfg: TeachConfig, seed: int = 0) -> T
     if cfg.script is not None:
         extra["script"] = Path(cfg.script).name
     try:
-        marks, interrupted = record_session(sim, operator, rec, out, extra)
+        marks, interrupted = record_session(sim, operator, rec, out, extra, cfg.on_status)
     finally:
         if hasattr(operator, "close"):
             operator.close()
