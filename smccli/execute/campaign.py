@@ -4,8 +4,9 @@ Trial ``i`` of a campaign with seed ``S`` runs on ``sample_layout(scene,
 np.random.default_rng([S, i]))``, so a campaign gives the same layouts and the same results
 whatever the number of workers (each trial starts from the state a fresh simulation has:
 a worker keeps one simulator and resets it; perception and control are deterministic).
-A trial runs on one thread of BLAS and OpenMP: the workers are the parallelism, and idle
-library threads spinning beside them took a quarter of a trial's CPU (measured). Workers
+A trial runs on one BLAS thread (numpy's and scipy's OpenBLAS): the workers are the
+parallelism, and idle OpenBLAS threads spinning beside them took a quarter of a trial's
+CPU (measured). Workers
 are processes of the ``spawn`` context: EGL contexts do not survive ``fork``; or the
 workers of an existing Dask cluster (``cluster``: its scheduler's address), each trial one
 task. Campaigns write no replay log and render only at decision
