@@ -15,21 +15,15 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 import sys  # noqa: E402
-import tempfile  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
-from smccli.bench.meta import machine  # noqa: E402
+from smccli.bench.meta import machine, write_rows  # noqa: E402
 from smccli.bench.paper import REPO  # noqa: E402
+from smccli.bench.throughput import bench_pick_tree, outcomes  # noqa: E402
 from smccli.execute.campaign import run_campaign  # noqa: E402
-from smccli.learn.compile import compile_logs  # noqa: E402
-from smccli.outputs import check_output, write_atomic  # noqa: E402
-
-
-def _outcomes(summary: dict[str, Any]) -> list[tuple[int, str]]:
-    return [(r["index"], r["outcome"]) for r in summary["trial_results"]]
+from smccli.outputs import check_output  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -40,11 +34,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=REPO / "docs" / "bench_cluster.json")
     args = ap.parse_args(argv)
     check_output(args.out, force=True)
+    meta = machine()
     from distributed import LocalCluster
 
-    with tempfile.TemporaryDirectory() as tmp:
-        tree = Path(tmp) / "bench_pick.json"
-        compile_logs(sorted((REPO / "sample_logs" / "bench_pick").glob("*.mcap")), tree)
+    with bench_pick_tree() as tree:
         rows: list[dict[str, Any]] = []
         reference: list[tuple[int, str]] | None = None
         for n in range(1, args.max_workers + 1):
@@ -65,8 +58,8 @@ def main(argv: list[str] | None = None) -> int:
                             seed=args.seed,
                             cluster=cluster.scheduler_address,
                         )
-                reference = reference or _outcomes(s)
-                if _outcomes(s) != reference:
+                reference = reference or outcomes(s)
+                if outcomes(s) != reference:
                     print(f"{runner} x {n}: outcomes differ from the first run", file=sys.stderr)
                     return 1
                 rows.append(
@@ -84,14 +77,9 @@ def main(argv: list[str] | None = None) -> int:
                     f"{s['wall_s']:.1f} s, {s['trials_per_second']:.2f} trials/s",
                     flush=True,
                 )
-    result = {
-        "machine": machine(),
-        "command": "python -m smccli.bench.cluster " + " ".join(argv or sys.argv[1:]),
-        "scene": "bench_pick",
-        "seed": args.seed,
-        "rows": rows,
-    }
-    write_atomic(args.out, json.dumps(result, indent=1) + "\n")
+    write_rows(
+        args.out, "smccli.bench.cluster", argv, meta, rows, scene="bench_pick", seed=args.seed
+    )
     print(f"wrote {args.out}")
     return 0
 

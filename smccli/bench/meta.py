@@ -5,9 +5,11 @@ A figure means little without where and at which commit it was measured.
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import subprocess
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -41,3 +43,20 @@ def machine() -> dict[str, Any]:
         "commit": commit(),
         "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
     }
+
+
+def write_rows(
+    out: Path,
+    module: str,
+    argv: list[str] | None,
+    meta: dict[str, Any],
+    rows: list[dict[str, Any]],
+    **fields: Any,
+) -> None:
+    """Write a benchmark's table of ``rows`` to ``out`` (atomically) with the machine
+    ``meta`` (taken when the run started), the command that reruns it and ``fields``."""
+    from smccli.outputs import write_atomic
+
+    args = sys.argv[1:] if argv is None else argv
+    result = {"machine": meta, "command": " ".join(["python -m", module, *args]), **fields}
+    write_atomic(out, json.dumps({**result, "rows": rows}, indent=1) + "\n")

@@ -20,19 +20,20 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 import resource  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
+from collections.abc import Iterator  # noqa: E402
+from contextlib import contextmanager  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
-from smccli.bench.meta import machine  # noqa: E402
+from smccli.bench.meta import machine, write_rows  # noqa: E402
 from smccli.bench.paper import REPO  # noqa: E402
 from smccli.execute.campaign import run_campaign  # noqa: E402
 from smccli.learn.compile import compile_logs  # noqa: E402
-from smccli.outputs import check_output, write_atomic  # noqa: E402
+from smccli.outputs import check_output  # noqa: E402
 
 
 def _cpu_s() -> float:
@@ -40,6 +41,20 @@ def _cpu_s() -> float:
     own = resource.getrusage(resource.RUSAGE_SELF)
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+@contextmanager
+def bench_pick_tree() -> Iterator[Path]:
+    """The tree of the bench_pick sample logs, compiled into a temporary folder."""
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = Path(tmp) / "bench_pick.json"
+        compile_logs(sorted((REPO / "sample_logs" / "bench_pick").glob("*.mcap")), tree)
+        yield tree
+
+
+def outcomes(summary: dict[str, Any]) -> list[tuple[int, str]]:
+    """(trial index, outcome) of a campaign summary: runs with other workers must agree."""
+    return [(r["index"], r["outcome"]) for r in summary["trial_results"]]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -51,9 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     check_output(args.out, force=True)
     meta = machine()
-    with tempfile.TemporaryDirectory() as tmp:
-        tree = Path(tmp) / "bench_pick.json"
-        compile_logs(sorted((REPO / "sample_logs" / "bench_pick").glob("*.mcap")), tree)
+    with bench_pick_tree() as tree:
         rows: list[dict[str, Any]] = []
         reference: list[tuple[int, str]] | None = None
         for n in args.workers:
@@ -62,9 +75,8 @@ def main(argv: list[str] | None = None) -> int:
             s = run_campaign(tree, trials=args.trials, seed=args.seed, workers=n)
             cpu = _cpu_s() - cpu0
             trial_s = float(statistics.median(r["wall_time"] for r in s["trial_results"]))
-            outcomes = [(r["index"], r["outcome"]) for r in s["trial_results"]]
-            reference = reference or outcomes
-            if outcomes != reference:
+            reference = reference or outcomes(s)
+            if outcomes(s) != reference:
                 print(f"{n} workers: outcomes differ from the first run", file=sys.stderr)
                 return 1
             rows.append(
@@ -90,14 +102,9 @@ def main(argv: list[str] | None = None) -> int:
                 f"load before {load:.1f}",
                 flush=True,
             )
-    result = {
-        "machine": meta,
-        "command": "python -m smccli.bench.throughput " + " ".join(argv or sys.argv[1:]),
-        "scene": "bench_pick",
-        "seed": args.seed,
-        "rows": rows,
-    }
-    write_atomic(args.out, json.dumps(result, indent=1) + "\n")
+    write_rows(
+        args.out, "smccli.bench.throughput", argv, meta, rows, scene="bench_pick", seed=args.seed
+    )
     print(f"wrote {args.out}")
     return 0
 
