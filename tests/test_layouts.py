@@ -5,6 +5,8 @@ here starts from its own random layout (``smc record --randomize --seed N``)."""
 from __future__ import annotations
 
 import itertools
+import multiprocessing as mp
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -28,33 +30,35 @@ N_PAIRS = 6
 """weigh_sort light/heavy pairs, each demonstration from its own random layout."""
 
 
-def _record(root: Path, scene: str, script: str, seeds: range) -> list[Path]:
-    out = []
-    for seed in seeds:
-        path = root / f"{scene}_{Path(script).stem}_r{seed}.mcap"
-        record(
-            RecordConfig(
-                scene=scene,
-                script=SAMPLE_LOGS / scene / script,
-                seed=seed,
-                output=path,
-                randomize=True,
-            )
+def _configs(root: Path, scene: str, script: str, seeds: range) -> list[RecordConfig]:
+    return [
+        RecordConfig(
+            scene=scene,
+            script=SAMPLE_LOGS / scene / script,
+            seed=seed,
+            output=root / f"{scene}_{Path(script).stem}_r{seed}.mcap",
+            randomize=True,
         )
-        out.append(path)
-    return out
+        for seed in seeds
+    ]
 
 
 @pytest.fixture(scope="module")
 def demos(tmp_path_factory) -> dict[str, list[Path]]:
+    """22 demonstrations, each from its own random layout, recorded on two processes (the
+    recordings are independent; spawn: EGL contexts do not survive fork)."""
     root = tmp_path_factory.mktemp("layouts")
-    return {
-        "bench_pick": _record(root, "bench_pick", "demo.yaml", range(1, N_BENCH + 1)),
-        "light": _record(root, "weigh_sort", "demo_light.yaml", range(1, N_PAIRS + 1)),
-        "heavy": _record(root, "weigh_sort", "demo_heavy.yaml", range(1, N_PAIRS + 1)),
-        "cube": _record(root, "pick_place", "demo1.yaml", range(1, 4)),
-        "pyramid": _record(root, "pick_place", "demo2.yaml", range(1, 4)),
+    groups = {
+        "bench_pick": _configs(root, "bench_pick", "demo.yaml", range(1, N_BENCH + 1)),
+        "light": _configs(root, "weigh_sort", "demo_light.yaml", range(1, N_PAIRS + 1)),
+        "heavy": _configs(root, "weigh_sort", "demo_heavy.yaml", range(1, N_PAIRS + 1)),
+        "cube": _configs(root, "pick_place", "demo1.yaml", range(1, 4)),
+        "pyramid": _configs(root, "pick_place", "demo2.yaml", range(1, 4)),
     }
+    with ProcessPoolExecutor(2, mp_context=mp.get_context("spawn")) as pool:
+        for summary in pool.map(record, [c for cfgs in groups.values() for c in cfgs]):
+            assert not summary.interrupted
+    return {k: [Path(c.output) for c in cfgs] for k, cfgs in groups.items()}
 
 
 def _start(log: Path, name: str) -> np.ndarray:
