@@ -97,6 +97,23 @@ class TrialResult:
     """The criterion's text or what stopped control."""
     layout: dict[str, list[float]]
     """Object poses at the start."""
+    decisions: list[dict[str, Any]]
+    """Per decision: the edge chosen, every candidate's D_P and the mapped goal, as
+    exact floats (a rerun must give the same bits: :meth:`repeatable`)."""
+    final_poses: dict[str, list[float]]
+    """Object [x, y, z, yaw] at the end (evaluation)."""
+
+    def repeatable(self) -> dict[str, Any]:
+        """Every field but the wall-clock timings: what a rerun of the campaign with the
+        same seed gives bit for bit, on any number of workers."""
+        out = asdict(self)
+        for name in WALL_CLOCK_FIELDS:
+            del out[name]
+        return out
+
+
+WALL_CLOCK_FIELDS = ("latency_ms", "perceive_ms", "match_ms", "icp_ms", "wall_time")
+"""The fields of a :class:`TrialResult` measured by the wall clock (they vary run to run)."""
 
 
 class SimCache:
@@ -178,7 +195,21 @@ def run_trial(
         wall_time=r.wall_time,
         reason=r.reason,
         layout={k: list(v) for k, v in layout.items()},
+        decisions=[
+            {
+                "chosen": d.chosen,
+                "d_p": {c.edge: _exact(c.d_p) for c in d.candidates},
+                "goal": None if d.mapped_goal is None else [float(v) for v in d.mapped_goal],
+            }
+            for d in r.decisions
+        ],
+        final_poses=r.final_poses,
     )
+
+
+def _exact(x: float) -> float | None:
+    """A float as JSON keeps it (None for inf or NaN, which JSON has not)."""
+    return float(x) if math.isfinite(x) else None
 
 
 # --- workers ----------------------------------------------------------------------------

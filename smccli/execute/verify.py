@@ -37,8 +37,6 @@ FINGER_TOLERANCE = 0.002
 """Largest finger joint difference [m or rad] of a log that means what it recorded."""
 YAW_WEIGHT = 0.1
 """Metres per radian of POI yaw in the POI difference (a 10 cm lever)."""
-PARKED_BELOW = -1.0
-"""Objects under this z [m] are parked out of the scene (the other variant's)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,15 +79,18 @@ class Verification:
 
 
 def initial_layout(
-    ground_truth: list[tuple[float, dict[str, np.ndarray]]], base: np.ndarray | None
+    ground_truth: list[tuple[float, dict[str, np.ndarray]]],
+    base: np.ndarray | None,
+    parked_z: float,
 ) -> Layout:
     """The layout a log started from: the first ground truth's object poses ``[x, y, z,
-    qw, qx, qy, qz]`` as ``[x, y, z, yaw]`` (parked objects left out), a mobile base's
-    first pose ``[x, y, yaw]`` as :data:`ROBOT_KEY`."""
+    qw, qx, qy, qz]`` as ``[x, y, z, yaw]``, leaving out objects parked at or below
+    ``parked_z`` [m] (:attr:`Sim.park_z`: another variant's), a mobile base's first pose
+    ``[x, y, yaw]`` as :data:`ROBOT_KEY`."""
     _, poses = ground_truth[0]
     layout: Layout = {}
     for name, p in poses.items():
-        if p[2] < PARKED_BELOW:
+        if p[2] <= parked_z + 1e-6:
             continue
         qw, qx, qy, qz = p[3:7]
         yaw = float(Rotation.from_quat([qx, qy, qz, qw]).as_euler("zyx")[0])
@@ -119,8 +120,9 @@ def verify_log(path: str | Path) -> Verification:
             f"{len(log.poi)} POIs; a recording has one state before the first command and "
             "one after each"
         )
-    sim = Sim(scene, initial_layout(log.ground_truth, base0))
+    sim = Sim(scene)
     try:
+        sim.reset(initial_layout(log.ground_truth, base0, sim.park_z))
         names = sim.joint_state().names
         logged_names = log.joint_states[0].names
         if tuple(names) != tuple(logged_names):

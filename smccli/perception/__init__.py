@@ -11,6 +11,8 @@ The mobile half (paper 4.2): a 2-D lidar scan (SL, :mod:`~smccli.perception.scan
 colour histogram (SI, :mod:`~smccli.perception.room`).
 """
 
+import open3d as o3d
+
 from smccli.perception.cloud import cloud_from_frame
 from smccli.perception.clusters import (
     Cluster,
@@ -34,6 +36,14 @@ from smccli.perception.scan import (
     scan_from_dict,
     scan_to_dict,
 )
+
+# open3d's parallel loops (ICP's normal equations, RANSAC, DBSCAN) reduce in thread order:
+# on 2 threads one pair of lidar scans aligned 40 times gave 17 different transforms (last
+# bits), enough to flip a decision near a threshold from one campaign run to the next.
+# One thread gives the same bits every time, and costs a single episode's alignment about
+# 5 ms (23 -> 28 ms); campaigns run a trial per core anyway. OMP_NUM_THREADS does not reach
+# open3d's own OpenMP (measured: still 21 different of 40); this does.
+o3d.utility.set_max_threads(1)
 
 __all__ = [
     "DEFAULT_EPSILON",

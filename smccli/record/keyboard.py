@@ -92,7 +92,7 @@ from smccli.record.hud import (
 from smccli.record.operators import OperatorOutput
 from smccli.world.controller import wrap
 from smccli.world.sensors import PoiCommand, SaliencyMark
-from smccli.world.sim import MARKER_GROUP, Sim
+from smccli.world.sim import HIDDEN_GROUP, Sim
 
 # GLFW key codes (the viewer passes them to key_callback).
 KEY_RIGHT, KEY_LEFT, KEY_DOWN, KEY_UP = 262, 263, 264, 265
@@ -311,7 +311,7 @@ class KeyboardOperator:
         # MuJoCo's viewer shows geom groups 0-2; the robot's own geoms sit in their group.
         with self.viewer.lock():
             self.viewer.opt.geomgroup[sim.robot.geom_group] = 1
-            self.viewer.opt.geomgroup[MARKER_GROUP] = 1
+            self.viewer.opt.geomgroup[HIDDEN_GROUP] = 1
             # Visualisation flags the viewer toggles on letters this operator uses (and, for
             # a base, on A and D: W/A/S/D come to hand, and D would hide the walls).
             keys = (*DRIVE, *EVENTS, ord("A"), ord("D"), *BINDINGS) if self.base else BINDINGS
@@ -472,7 +472,7 @@ class KeyboardOperator:
         self.viewer.sync()
         # Only the marker may be dragged: a Ctrl-drag on any other body pushes it, which no
         # command in the log would explain (``smc replay --verify`` would flag the log).
-        self.sim.data.xfrc_applied[:] = 0.0
+        self.sim.clear_pushes()
         if self._on_ready is not None:
             # The viewer has drawn and is reading keys: tell the person (and tests).
             self._on_ready(MM_HELP if self.mobile_manipulator else BASE_HELP if self.base else HELP)

@@ -32,19 +32,18 @@ REST_SPEED = (0.02, 0.2)
 """At rest: linear [m/s] and angular [rad/s] speed below these."""
 MARKER_BODY = "smc_target"
 """The teleop target marker's body (``Sim(target_marker=True)``)."""
-MARKER_GROUP = 5
-"""Its geom group: the viewer shows it, the robot's sensors do not."""
+HIDDEN_GROUP = 5
+"""The geom group no sensor sees (camera, lidar): the teleop marker's, and parked
+objects' (the viewer still shows it). Scene and robot files leave it empty."""
 MARKER_RADIUS = 0.025
 """Its sphere's radius [m]: big enough to pick with the mouse."""
 CONTROL_PERIOD = 0.01
 """Control period [s] (100 Hz); the physics timestep comes from the model (2 ms)."""
 GRAVITY = 9.81
-PARK_X, PARK_Y0, PARK_DY = 2.5, -2.0, 0.4
-"""Where objects absent from a layout rest: on the floor, behind the camera [m]."""
-HIDDEN_Z = -50.0
-"""Where fixed objects absent from a layout are moved [m]."""
-FLOOR_Z = -0.75
-"""Height of the floor plane of the built-in scenes [m]."""
+PARK_DEPTH = 1.0
+"""How far below the scene's lowest geom objects absent from a layout are parked [m]."""
+PARK_GAP = 0.1
+"""Space between two parked objects [m]."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -163,8 +162,7 @@ class Sim:
         self._lidar_site = -1
         for s in robot.sensors:
             if s.type == "lidar":
-                ignore = (robot.geom_group, MARKER_GROUP) if target_marker else robot.geom_group
-                self._lidar = Lidar(m, s.target, ignore_group=ignore)
+                self._lidar = Lidar(m, s.target, ignore_group=(robot.geom_group, HIDDEN_GROUP))
                 self._lidar_site = self._id(mujoco.mjtObj.mjOBJ_SITE, s.target)
         self._cam_id = self._id(mujoco.mjtObj.mjOBJ_CAMERA, scene.camera.name)
         self._body = {o.name: self._id(mujoco.mjtObj.mjOBJ_BODY, o.name) for o in scene.objects}
@@ -188,6 +186,15 @@ class Sim:
         # theirs).
         self._body_pos0 = m.body_pos.copy()
         self._body_quat0 = m.body_quat.copy()
+        # Parking takes an object out of contact and out of the sensors' groups: reset puts
+        # them back.
+        self._geom_contype0 = m.geom_contype.copy()
+        self._geom_conaffinity0 = m.geom_conaffinity.copy()
+        self._geom_group0 = m.geom_group.copy()
+        self.park_z = _lowest_point(m) - PARK_DEPTH
+        """Parked objects hang this far down [m]: under every geom of the scene, so an
+        object above it is in the scene (:func:`smccli.execute.verify.initial_layout`)."""
+        self._parked: tuple[int, ...] = ()
         self.reset(layout, base_pose)
 
     def _id(self, kind: mujoco.mjtObj, name: str) -> int:
@@ -214,6 +221,9 @@ class Sim:
         m, d = self.model, self.data
         m.body_pos[:] = self._body_pos0
         m.body_quat[:] = self._body_quat0
+        m.geom_contype[:] = self._geom_contype0
+        m.geom_conaffinity[:] = self._geom_conaffinity0
+        m.geom_group[:] = self._geom_group0
         mujoco.mj_resetData(m, d)
         if layout is None:
             # A scene with variants has look-alike objects sharing a nominal pose: show one.
@@ -239,25 +249,8 @@ class Sim:
             else:  # static: move the body itself (the scale, fixed bins)
                 m.body_pos[self._body[name]] = [x, y, z]
                 m.body_quat[self._body[name]] = quat
-        # Fixed objects the layout leaves out (the other variant's poster) go far below
-        # the floor, out of every sensor's reach.
-        for o in self.scene.objects:
-            if o.fixed and o.name not in layout:
-                m.body_pos[self._body[o.name]] = [PARK_X, PARK_Y0, HIDDEN_Z]
-        # Objects the layout leaves out (another variant) rest on the floor behind the
-        # camera, out of its view and out of the workspace.
-        parked = [o for o in self.scene.objects if o.name not in layout and not o.fixed]
-        for i, o in enumerate(parked):
-            qa, _ = self._free_qadr[o.name]
-            d.qpos[qa : qa + 7] = [
-                PARK_X,
-                PARK_Y0 + PARK_DY * i,
-                FLOOR_Z + o.size[2] / 2,
-                1.0,
-                0.0,
-                0.0,
-                0.0,
-            ]
+        # Objects the layout leaves out (another variant's) leave the world.
+        self._park([o for o in self.scene.objects if o.name not in layout])
         self.present = tuple(n for n in layout)
         """Names of the objects the layout placed (evaluation only)."""
         if self.controller is not None:
@@ -281,6 +274,49 @@ class Sim:
         )
         # Tare: the empty scale's reading is the platform's own weight.
         self._tare = 0.0 if self._scale_sensor is None else self._scale_force()
+
+    def _park(self, objects: list[ObjectSpec]) -> None:
+        """Take ``objects`` (absent from the layout: another variant's) out of the world:
+        no contacts, in :data:`HIDDEN_GROUP`, side by side :data:`PARK_DEPTH` under the
+        scene's lowest geom; a free one held at rest by a force that cancels its weight.
+
+        Resting them on a floor would need free floor out of every sensor's view, which a
+        mobile robot's scenes do not have; and a floor plane is a half-space in MuJoCo: an
+        object parked under one is thrown out of it (loco_manip's, at 22 m/s)."""
+        m, d = self.model, self.data
+        x = float(m.stat.center[0])
+        parked = []
+        for o in objects:
+            root = self._body[o.name]
+            bodies = [b for b in range(m.nbody) if _descends(m, b, root)]
+            geoms = np.flatnonzero(np.isin(m.geom_bodyid, bodies))
+            m.geom_contype[geoms] = 0
+            m.geom_conaffinity[geoms] = 0
+            m.geom_group[geoms] = HIDDEN_GROUP
+            radius = float(m.geom_rbound[geoms].max(initial=0.1))
+            at = [x + radius, float(m.stat.center[1]), self.park_z]
+            x += 2 * radius + PARK_GAP
+            if o.name not in self._free_qadr:  # a static body (a poster): move it
+                m.body_pos[root], m.body_quat[root] = at, [1, 0, 0, 0]
+                continue
+            qa, _ = self._free_qadr[o.name]
+            d.qpos[qa : qa + 7] = [*at, 1, 0, 0, 0]
+            parked += bodies
+        self._parked = tuple(parked)
+        self._hold_parked()
+
+    def _hold_parked(self) -> None:
+        """Each parked body's weight cancelled at its centre of mass (xfrc_applied acts
+        there), so it stays where it was put (gravcomp would need a model compiled with it)."""
+        for b in self._parked:
+            weight = -self.model.body_mass[b] * self.model.opt.gravity[2]
+            self.data.xfrc_applied[b] = [0.0, 0.0, weight, 0.0, 0.0, 0.0]
+
+    def clear_pushes(self) -> None:
+        """Remove forces a person applied in the viewer (a Ctrl-drag), keeping what holds
+        parked objects in place."""
+        self.data.xfrc_applied[:] = 0.0
+        self._hold_parked()
 
     @property
     def t(self) -> float:
@@ -474,8 +510,7 @@ class Sim:
         r = self._renderer
         opt = mujoco.MjvOption()
         opt.geomgroup[:] = 1
-        if self.marker_id >= 0:
-            opt.geomgroup[MARKER_GROUP] = 0  # the teleop marker is the viewer's, not the world's
+        opt.geomgroup[HIDDEN_GROUP] = 0  # the teleop marker, parked objects: not the world's
         opt.sitegroup[:] = 0  # sites (the POI marker) are not seen by a real camera
         r.update_scene(self.data, camera=self._cam_id, scene_option=opt)
         rgb = r.render().copy()
@@ -729,6 +764,24 @@ class Sim:
         return set(dict(self.scene.variants)[variant]) <= set(self.present)
 
 
+def _descends(m: mujoco.MjModel, body: int, root: int) -> bool:
+    """Whether ``body`` is ``root`` or below it in the kinematic tree."""
+    while body > 0:
+        if body == root:
+            return True
+        body = int(m.body_parentid[body])
+    return False
+
+
+def _lowest_point(m: mujoco.MjModel) -> float:
+    """The lowest z [m] of the model's geoms at its initial state (a plane: its height,
+    a geom: its centre less its bounding radius)."""
+    d = mujoco.MjData(m)
+    mujoco.mj_kinematics(m, d)
+    z = d.geom_xpos[:, 2] - m.geom_rbound
+    return float(z.min(initial=0.0))
+
+
 def _layout_seed(layout: Layout) -> int:
     """A seed from a layout's poses (its names and numbers, in order)."""
     text = repr(sorted((k, tuple(float(x) for x in v)) for k, v in layout.items()))
@@ -737,7 +790,7 @@ def _layout_seed(layout: Layout) -> int:
 
 def _with_target_marker(scene: Scene) -> mujoco.MjModel:
     """The scene's model plus the teleop target marker: a mocap body :data:`MARKER_BODY`
-    with one small sphere in geom group :data:`MARKER_GROUP` that collides with nothing.
+    with one small sphere in geom group :data:`HIDDEN_GROUP` that collides with nothing.
 
     MuJoCo's viewer lets a person select a body (double-click) and move a mocap body with
     Ctrl + right drag (rotate: Ctrl + left drag), which is how the paper's interactive
@@ -751,7 +804,7 @@ def _with_target_marker(scene: Scene) -> mujoco.MjModel:
         type=mujoco.mjtGeom.mjGEOM_SPHERE,
         size=[MARKER_RADIUS, 0, 0],
         rgba=[1.0, 0.1, 0.9, 0.7],
-        group=MARKER_GROUP,
+        group=HIDDEN_GROUP,
         contype=0,
         conaffinity=0,
         mass=0.0,
