@@ -1,20 +1,25 @@
 """What control may use during replay: the robot's sensors and its command input.
 
 Honesty (DESIGN.md section 2): the executor (:mod:`smccli.execute.executor`) sees the
-simulator only through :class:`Sensors`, which has no ground truth and no object state.
-Object poses are read after control by :mod:`smccli.execute.evaluation`.
+simulator only through :class:`Sensors`, which has no ground truth and no object state:
+sensor readings, joint encoders and the scene's nominal model. Object poses are read after
+control by :mod:`smccli.execute.evaluation`. ``tests/test_honesty.py`` audits every access
+to the simulator during control, on an arm, a base and a mobile manipulator.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from smccli.errors import SmcError
 from smccli.perception.scan import Scan2D
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
-from smccli.world.sim import Sim
+
+if TYPE_CHECKING:  # the type only: control holds a Sim through this facade alone
+    from smccli.world.sim import Sim
 
 
 class Sensors:
@@ -27,8 +32,11 @@ class Sensors:
     def __init__(self, sim: Sim, on_step: Callable[[PoiCommand], None] | None = None) -> None:
         self._sim = sim
         self._on_step = on_step
-        self.model = sim.model
-        """The robot's kinematic model (for reachability; no object state is read)."""
+        self.model = sim.scene.model()
+        """The scene compiled afresh from its files: the robot and the scene where the
+        scene file puts them (for reachability). Not the simulator's model, which each
+        layout rewrites (bins, scale, wardrobe, tables): control never sees where a layout
+        put anything."""
         self.robot = sim.robot
         """The robot file: joints, POI, gripper, home posture."""
         self.control_period = sim.control_period
