@@ -42,15 +42,18 @@ system-deps:
 test: setup
 	$(PY) -m pytest -q --durations=15
 
-# The suite beside two CPU burners (this machine has 2 cores): no test may depend on the
-# machine's speed. The burners are bounded (timeout) and stopped when the suite ends.
+# The suite beside CPU burners, twice as many as cores by default (BURNERS=N to change):
+# no test may depend on the machine's speed. The burners are bounded (timeout) and stopped
+# when the suite ends.
 BURN_S ?= 3600
+BURNERS ?= $(shell echo $$((2 * $$(nproc))))
 test-under-load: setup
-	@set -e; \
-	timeout $(BURN_S) $(PY) -c "while True: pass" & b1=$$!; \
-	timeout $(BURN_S) $(PY) -c "while True: pass" & b2=$$!; \
-	trap 'kill $$b1 $$b2 2>/dev/null || true' EXIT; \
-	echo "two CPU burners running (pids $$b1 $$b2, at most $(BURN_S) s)"; \
+	@set -e; pids=""; \
+	for i in $$(seq 1 $(BURNERS)); do \
+	  timeout $(BURN_S) $(PY) -c "while True: pass" & pids="$$pids $$!"; \
+	done; \
+	trap 'kill $$pids 2>/dev/null || true' EXIT; \
+	echo "$(BURNERS) CPU burners running on $$(nproc) cores (pids$$pids, at most $(BURN_S) s)"; \
 	$(PY) -m pytest -q --durations=15
 
 test-fast: setup

@@ -41,15 +41,30 @@ def scan(sim: Sim) -> Scan2D:
 def test_base_goes_where_it_is_sent_and_odometry_says_so(sim: Sim) -> None:
     sim.reset(base_pose=np.array([0.0, 0.0, 0.0]))
     for x, y, yaw in [(0.5, 0.3, 1.0), (1.2, -0.4, -2.8), (0.8, 0.2, 3.0)]:
-        drive(sim, x, y, yaw)
+        start = _yaw_joint(sim)
+        turn = []
+        for _ in range(300):
+            sim.step(PoiCommand(sim.t, np.array([x, y, 0.0, yaw]), 1.0))
+            turn.append(_yaw_joint(sim))
         poi = sim.poi()
         assert math.hypot(poi[0] - x, poi[1] - y) < 0.005, poi
         assert abs(wrap(poi[3] - yaw)) < math.radians(0.5), poi
         names = sim.joint_state().names
         q = dict(zip(names, sim.joint_state().position, strict=True))
         assert (q["base_x"], q["base_y"]) == pytest.approx((x, y), abs=0.005)
-    # -2.8 to 3.0 rad is 0.48 rad the short way round: the base does not spin a full turn.
-    assert abs(dict(zip(names, sim.joint_state().position, strict=True))["base_yaw"]) < 4
+        # The continuous hinge turns the short way: 1.0 -> -2.8 rad is 2.48 rad on through
+        # +pi (the joint ends at 3.48), not 3.8 rad back through zero; then 3.48 -> 3.0 is
+        # 0.48 rad back, not 5.8 forward. The joint ends the short turn away from where it
+        # started and never strays beyond the two ends.
+        short = wrap(yaw - start)
+        assert turn[-1] == pytest.approx(start + short, abs=math.radians(0.5)), (start, yaw)
+        lo, hi = sorted((start, start + short))
+        assert lo - 0.05 < min(turn) and max(turn) < hi + 0.05, (start, yaw, min(turn), max(turn))
+
+
+def _yaw_joint(sim: Sim) -> float:
+    js = sim.joint_state()
+    return float(dict(zip(js.names, js.position, strict=True))["base_yaw"])
 
 
 def test_base_stops_at_a_wall(sim: Sim) -> None:
