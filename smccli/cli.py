@@ -32,8 +32,30 @@ app = typer.Typer(
     help="Teach a robot a task from a few demonstrations (Sensory-Motor "
     "Contingencies, Stefanini et al. 2024).",
 )
-out = Console()
+out = Console(soft_wrap=True)  # a line is never cut: paths stay whole in logs and pipes
 err = Console(stderr=True)
+
+
+def _one_line(text: str) -> str:
+    """``text`` on one line, escaped for rich: its whitespace runs (newlines too) collapsed."""
+    return escape(" ".join(str(text).split()))
+
+
+def say(text: str) -> None:
+    """A line on stderr, never wrapped: off a terminal (CI, pipes, log files) rich would
+    wrap it at 80 columns, cutting file paths in two."""
+    err.print(_one_line(text), highlight=False, soft_wrap=True)
+
+
+def warn(text: str) -> None:
+    """``warning: ...`` on one line of stderr."""
+    err.print(f"[yellow]warning:[/] {_one_line(text)}", highlight=False, soft_wrap=True)
+
+
+def _live(*columns, **kwargs) -> Progress:
+    """A transient progress display on stderr, only on a terminal: off one, it would leave
+    a blank line behind (and logs get plain status lines instead)."""
+    return Progress(*columns, console=err, transient=True, disable=not err.is_terminal, **kwargs)
 
 
 class OperatorKind(str, Enum):
@@ -143,12 +165,10 @@ def record(
         realtime=realtime,
         episodes=episodes,
     )
-    with Progress(
+    with _live(
         TextColumn("[bold]recording[/]"),
         TextColumn("{task.description}"),
         TimeElapsedColumn(),
-        console=err,
-        transient=True,
     ) as progress:
         task = progress.add_task("", total=None)
         next_line = [1.0]
@@ -162,21 +182,17 @@ def record(
             if not err.is_terminal and s.t >= next_line[0]:
                 # No live bar off a terminal: a plain line per simulated second, so logs
                 # and supervisors see how far the recording got and what is safe on disk.
-                err.print(f"recording: {text}", highlight=False, soft_wrap=True)
+                say(f"recording: {text}")
                 next_line[0] += 1.0
 
-        summaries = record_episodes(
-            cfg, on_status=status, on_message=lambda m: progress.console.print(escape(m))
-        )
+        summaries = record_episodes(cfg, on_status=status, on_message=say)
     for summary in summaries:
         _print_summary(summary)
     summary = summaries[-1]
     if summary.interrupted:
-        err.print(
-            f"interrupted ({summary.interrupted}): kept {escape(str(summary.path))} with "
-            f"{summary.duration:.1f} s, marked interrupted in its metadata",
-            highlight=False,
-            soft_wrap=True,
+        say(
+            f"interrupted ({summary.interrupted}): kept {summary.path} with "
+            f"{summary.duration:.1f} s, marked interrupted in its metadata"
         )
         raise typer.Exit(130)
 
@@ -225,13 +241,11 @@ def compile_cmd(
 
     topic_map = None if topics is None else load_topic_map(topics)
 
-    with Progress(
+    with _live(
         TextColumn("[bold]compiling[/]"),
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("{task.description}"),
-        console=err,
-        transient=True,
     ) as progress:
         task = progress.add_task("", total=len(logs))
         seen: set[Path] = set()
@@ -250,13 +264,13 @@ def compile_cmd(
             rebuild=rebuild,
             overrides=set_ or [],
             on_progress=on_progress,
-            on_warning=lambda m: err.print(f"[yellow]warning:[/] {escape(m)}"),
+            on_warning=warn,
             topic_map=topic_map,
             workers=workers,
         )
         progress.update(task, completed=len(logs))
     for p in result.skipped:
-        err.print(f"skipped {escape(str(p))} (already in the tree)")
+        say(f"skipped {p} (already in the tree)")
     state = f"version {result.tree.version}" + ("" if result.changed else " (unchanged)")
     out.print(
         f"[bold green]{output}[/]: {state}, {len(result.tree.nodes)} nodes, "
@@ -481,14 +495,14 @@ def replay(
         def teach_status(s) -> None:
             # A plain line per simulated second of teaching (the viewer's HUD shows it too).
             if s.t >= next_line[0]:
-                err.print(f"teaching: sim {s.t:6.2f} s  marks {s.marks}", highlight=False)
+                say(f"teaching: sim {s.t:6.2f} s  marks {s.marks}")
                 next_line[0] = s.t + 1.0
 
         teach_cfg = TeachConfig(
             tree_path=tree,
             operator=teach,
             script=script,
-            on_message=lambda m: err.print(escape(m)),
+            on_message=say,
             on_status=teach_status,
         )
     elif script is not None:
@@ -500,14 +514,12 @@ def replay(
         raise SmcError("--workers counts local processes; with --cluster the cluster's run")
 
     if trials > 0:
-        with Progress(
+        with _live(
             TextColumn("[bold]campaign[/]"),
             BarColumn(),
             MofNCompleteColumn(),
             TextColumn("{task.description}"),
             TimeElapsedColumn(),
-            console=err,
-            transient=True,
         ) as progress:
             task = progress.add_task("", total=trials)
 
@@ -529,9 +541,7 @@ def replay(
             )
         _print_campaign(summary)
         if min_success is not None and summary["success_rate"] < min_success:
-            err.print(
-                f"success rate {summary['success_rate']:.3f} below --min-success {min_success}"
-            )
+            say(f"success rate {summary['success_rate']:.3f} below --min-success {min_success}")
             raise typer.Exit(1)
         return
     result = run_episode(
@@ -587,7 +597,7 @@ def inspect(
         port=port,
         grpc_port=grpc_port,
         force=force,
-        on_warning=lambda m: err.print(f"[yellow]warning:[/] {escape(m)}"),
+        on_warning=warn,
         on_message=lambda m: out.print(escape(m), highlight=False, soft_wrap=True),
         topic_map=topic_map,
     )
@@ -677,7 +687,7 @@ def export(
         log,
         output,
         force=force,
-        on_warning=lambda m: err.print(f"[yellow]warning:[/] {escape(m)}"),
+        on_warning=warn,
     )
     out.print(
         f"[bold green]wrote[/] {escape(str(summary.out))}  (ROS 2 bag, "
@@ -706,11 +716,10 @@ def main() -> None:
         app()
     except SmcError as exc:
         # One line, whatever the message holds: scripts and CI grep for it.
-        message = escape(" ".join(str(exc).split()))
-        err.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True, markup=True)
+        err.print(f"[bold red]error:[/] {_one_line(str(exc))}", highlight=False, soft_wrap=True)
         sys.exit(exc.exit_code)
     except KeyboardInterrupt:
-        err.print("interrupted")
+        say("interrupted")
         sys.exit(130)
 
 

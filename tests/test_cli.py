@@ -51,3 +51,49 @@ def test_expected_failures_are_one_line_exit_2(args, needle):
 def test_usage_error_is_reported_by_typer():
     proc = smc("compile")  # LOGS missing
     assert proc.returncode == 2 and "Missing argument" in proc.stderr
+
+
+def _foreign_mcap(path) -> None:
+    """An MCAP file of somebody else's: one JSON message, no smc metadata, no scene."""
+    from mcap.writer import Writer
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        schema = w.register_schema("x", "jsonschema", b"{}")
+        channel = w.register_channel("/foo", "json", schema)
+        w.add_message(channel, 0, b"{}", 0)
+        w.finish()
+
+
+def test_warnings_and_errors_are_one_line_each_off_a_terminal(tmp_path, sample_trees):
+    """Piped stderr (CI, log files) and no COLUMNS: rich would wrap at 80 columns, cutting
+    the path in two, and a progress display would leave a blank line. Each warning and the
+    error are one whole line, the error last."""
+    import os
+    import subprocess
+    import sys
+
+    from conftest import REPO
+
+    log = tmp_path / ("a_folder_with_a_rather_long_name_" * 2) / "foreign_recording_of_a_lab.mcap"
+    _foreign_mcap(log)
+    env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
+    env.setdefault("MUJOCO_GL", "egl")
+
+    def run(*args) -> subprocess.CompletedProcess[str]:
+        cmd = [sys.executable, "-m", "smccli.cli", *map(str, args)]
+        return subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=REPO)
+
+    compiled = run("compile", log, "-o", tmp_path / "tree.json")
+    inspected = run("inspect", sample_trees["bench_pick"], log, "--save", tmp_path / "x.rrd")
+    for proc, code, last in ((compiled, 2, "error: "), (inspected, 0, "warning: ")):
+        lines = proc.stderr.split("\n")
+        assert lines[-1] == "" and "" not in lines[:-1], proc.stderr  # no blank line
+        lines = lines[:-1]
+        assert proc.returncode == code, proc.stderr
+        assert lines and all(ln.startswith(("warning: ", "error: ")) for ln in lines), lines
+        assert lines[-1].startswith(last)
+        assert all(str(log) in ln or log.name in ln for ln in lines), lines
+        assert any(len(ln) > 120 for ln in lines)

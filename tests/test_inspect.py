@@ -489,6 +489,30 @@ def test_bad_tree_or_log_is_one_line_and_exit_code_2(inputs, tmp_path):
         assert not list(tmp_path.glob("*.rrd")), (name, "no output on error")
 
 
+def test_a_readable_log_without_a_topic_is_shown_with_a_warning(inputs, tmp_path):
+    """A viewer shows what a log holds (README, errors): a log without its camera, or
+    without its scene attachment, is written with one warning line naming what is
+    missing, exit 0; the recording holds what the log does hold."""
+    from smccli.logs.reader import strip_topic
+
+    no_camera = strip_topic(inputs.demos[0], tmp_path / "no_camera.mcap", "/camera/color")
+    rrd = tmp_path / "no_camera.rrd"
+    p = subprocess.run(
+        [PY, "-m", "smccli.cli", "inspect", str(inputs.tree), str(no_camera), "--save", str(rrd)],
+        capture_output=True,
+        text=True,
+        env={k: v for k, v in os.environ.items() if k != "COLUMNS"},
+    )
+    assert p.returncode == 0, p.stderr
+    lines = p.stderr.splitlines()
+    assert lines == [
+        f"warning: {no_camera}: no /camera/color: shown without (compile would refuse it)"
+    ]
+    (entities,) = read_rrd(rrd).values()
+    assert {"/tree", "/world/poi", "/world/perception/points"} <= set(entities)
+    assert not [e for e in entities if "camera" in e], sorted(entities)
+
+
 def test_library_errors_are_typed(inputs, tmp_path):
     with pytest.raises(TreeError, match="nope.json"):
         inspect(tmp_path / "nope.json", [], save=tmp_path / "x.rrd")

@@ -167,6 +167,8 @@ def inspect(
         else read_ros2_bag(Path(p), topic_map, on_warning=warn)
         for p in logs
     ]
+    for log in loaded:
+        _warn_missing_topics(log, warn)
     if serve:
         addresses = serve_recordings(
             tree,
@@ -185,6 +187,16 @@ def inspect(
     assert save is not None
     ids = write_rrd(tree, loaded, Path(save), tree_name=Path(tree_path).name, warn=warn)
     return InspectResult(tuple(ids), Path(save), None, tuple(warnings))
+
+
+def _warn_missing_topics(log: Any, warn: Callable[[str], None]) -> None:
+    """A viewer shows what a log holds: a topic compile would need and the log lacks is a
+    warning naming it, not an error (``smc compile`` and ``smc doctor`` refuse such a log)."""
+    from smccli.learn.compile import required_topics
+
+    missing = sorted(t for t in required_topics(log) if log.topic_counts.get(t, 0) == 0)
+    if missing:
+        warn(f"{log.path}: no {', '.join(missing)}: shown without (compile would refuse it)")
 
 
 # --- recordings -------------------------------------------------------------------------

@@ -462,7 +462,9 @@ def _action(
     return action_from_path(t, path, grip, cluster, params, held_symmetry=held_symmetry)
 
 
-def _required_topics(log: Log, scene: Scene | None = None) -> set[str]:
+def required_topics(log: Log, scene: Scene | None = None) -> set[str]:
+    """The topics compile needs in ``log`` (its scene's robot decides: an arm, a base, a
+    mobile manipulator; default: the scene the log carries, else an arm's)."""
     if scene is None:  # doctor: the log's own scene, if it can be rebuilt
         try:
             scene = scene_of_log(log.attachments, log.path)
@@ -568,7 +570,7 @@ def _read(job: _Job) -> _Read:
         )
         scene = scene_of_log(log.attachments, path)
         missing = sorted(
-            _required_topics(log, scene) - {t for t, n in log.topic_counts.items() if n > 0}
+            required_topics(log, scene) - {t for t, n in log.topic_counts.items() if n > 0}
         )
         if missing:
             raise LogError(

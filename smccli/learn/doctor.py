@@ -450,10 +450,10 @@ def _counts(raw: _Raw) -> dict[int, int]:
 
 
 def _check_topics(c: _Context) -> Check:
-    from smccli.learn.compile import _required_topics
+    from smccli.learn.compile import required_topics
 
     assert c.log is not None
-    needed = sorted(_required_topics(c.log))
+    needed = sorted(required_topics(c.log))
     counts = c.log.topic_counts
     scene = c.log.metadata.get("scene", "?")
     missing = [t for t in needed if counts.get(t, 0) == 0]
