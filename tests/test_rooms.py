@@ -20,7 +20,14 @@ from smccli.learn.tree import ROOT, load_tree
 from smccli.logs import read_log
 from smccli.perception.scan import pose_compose
 from smccli.record.operators import load_script, parse_script, run_script, script_layout
-from smccli.world.scene import ROBOT_KEY, SCENES_DIR, load_scene, load_scene_from_text
+from smccli.world.scene import (
+    ROBOT_KEY,
+    SCENES_DIR,
+    load_scene,
+    load_scene_from_text,
+    nominal_layout,
+    sample_layout,
+)
 from smccli.world.sim import OdometryDrift, Sim
 
 DEMOS = sorted((SAMPLE_LOGS / "rooms").glob("demo*.mcap"))
@@ -231,3 +238,55 @@ def test_script_to_an_unknown_place_is_one_line(scene) -> None:
         ScriptError, match=r"x.yaml: step 0 \(line 3, move_to\): no place 'kitchen'"
     ):
         list(run_script(script, Sim(scene)))
+
+
+def _rooms_with_start(tmp_path, x: list[float], y: list[float], name: str):
+    """The rooms scene with another start range (a user's scene file)."""
+    text = (SCENES_DIR / "rooms" / "scene.yaml").read_text()
+    text = text.replace("mjcf: scene.xml", f"mjcf: {SCENES_DIR / 'rooms' / 'scene.xml'}")
+    text = text.replace(
+        "range: {x: [-0.5, 0.5], y: [-0.5, 0.5], yaw: [-0.7854, 0.7854]}",
+        f"range: {{x: {x}, y: {y}, yaw: [-3.14, 3.14]}}",
+    )
+    assert f"x: {x}" in text
+    path = tmp_path / name / "scene.yaml"
+    path.parent.mkdir()
+    path.write_text(text)
+    return path
+
+
+def test_starts_inside_a_wall_are_drawn_again(tmp_path):
+    """A start range over room 1's walls (x -1.2..3.2 m, y -1.7..1.7 m; walls at x = -1, 3
+    and y = +-1.5): about a third of the starts drawn from it put the base in a wall. Each
+    layout's start is free: the simulator placed there touches nothing."""
+    from smccli.world.scene import start_collisions
+
+    path = _rooms_with_start(tmp_path, [-1.2, 3.2], [-1.7, 1.7], "wide")
+    scene = load_scene(path)
+    raw = np.random.default_rng(0)
+    drawn = [
+        (raw.uniform(-1.2, 3.2), raw.uniform(-1.7, 1.7), raw.uniform(-3.14, 3.14))
+        for _ in range(60)
+    ]
+    layout = nominal_layout(scene, "green_arrow")
+    hits = [start_collisions(scene, {**layout, "robot": (x, y, 0.0, a)}) for x, y, a in drawn]
+    assert sum(bool(h) for h in hits) >= 10, "the range reaches into the walls"
+    sim = Sim(scene)
+    for i in range(40):
+        lay = sample_layout(scene, np.random.default_rng([0, i]))
+        sim.reset(lay)
+        assert sim.robot_contacts() == [], (lay["robot"], sim.robot_contacts())
+
+
+def test_a_start_range_inside_a_wall_is_refused_in_one_line(tmp_path, tree_path):
+    """A start range within the wall between rooms 1 and 2: no free start exists; the scene
+    is refused with one line naming the file and what to change, exit 2."""
+    path = _rooms_with_start(tmp_path, [2.96, 2.99], [-1.0, -0.5], "in_wall")
+    with pytest.raises(SceneError, match="start.range leaves the robot no room"):
+        sample_layout(load_scene(path), np.random.default_rng(0), max_tries=50)
+    for extra in ([], ["--trials", "3", "--workers", "2"]):
+        proc = smc("replay", tree_path, "--scene", path, *extra)
+        lines = proc.stderr.splitlines()
+        assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+        assert lines[0].startswith(f"error: {path}: start.range leaves the robot no room")
+        assert "room1_wall_e_s" in lines[0]

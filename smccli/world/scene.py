@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +36,7 @@ from smccli.world.robot import (
     load_robot,
     resolve_robot_path,
     robot_from_text,
+    robot_geoms,
 )
 
 SCENES_DIR = Path(__file__).parent / "scenes"
@@ -422,13 +424,16 @@ def sample_layout(
     """Draw each object's x, y, yaw uniformly from its ranges; redraw while footprints overlap.
 
     A scene with variants draws one uniformly unless ``variant`` is given. Footprints are
-    the circles circumscribing the objects (conservative), with 1 cm between.
+    the circles circumscribing the objects (conservative), with 1 cm between. A mobile
+    robot's start is drawn again while it collides (:func:`start_collisions`); SceneError
+    when ``max_tries`` draws give no free layout.
     """
     gap = 0.01
     if variant is None and scene.variants:
         names = [v for v, _ in scene.variants]
         variant = names[int(rng.integers(len(names)))]
     present = scene.variant_objects(variant)
+    blocked: set[str] = set()
     for _ in range(max_tries):
         layout: Layout = {}
         moved: dict[str, tuple[float, float, float, float]] = {}
@@ -447,11 +452,73 @@ def sample_layout(
             st = scene.start
             x, y, yaw = _draw(rng, st.range_x, st.range_y, st.range_yaw)
             layout[ROBOT_KEY] = (x, y, 0.0, yaw)
-        if not _overlaps(scene, layout, gap):
+        if _overlaps(scene, layout, gap):
+            continue
+        # A start inside a wall or a piece of furniture is drawn again: the episode would
+        # only fail as a collision, which says nothing about the tree.
+        hit = start_collisions(scene, layout) if scene.start is not None else []
+        if not hit:
             return layout
+        blocked.update(hit)
+    if blocked:
+        raise SceneError(
+            f"{scene.yaml_path or scene.name}: start.range leaves the robot no room: every start "
+            f"of {max_tries} drawn collides (with {', '.join(sorted(blocked))}); move or "
+            "narrow the start's ranges"
+        )
     raise SceneError(
         f"scene {scene.name}: no overlap-free layout in {max_tries} draws (ranges too tight)"
     )
+
+
+_CHECKERS: dict[str, tuple[mujoco.MjModel, mujoco.MjData, threading.Lock]] = {}
+
+
+def start_collisions(scene: Scene, layout: Layout) -> list[str]:
+    """Names of what the robot's collision geoms penetrate at the layout's start: the base
+    at :data:`ROBOT_KEY`, an arm at home, furniture and objects where the layout puts them
+    (floor planes left out). Empty when the start is free."""
+    robot = scene.robot
+    if scene.digest not in _CHECKERS:
+        model = scene.model()
+        _CHECKERS[scene.digest] = (model, mujoco.MjData(model), threading.Lock())
+    m, d, lock = _CHECKERS[scene.digest]
+    with lock:  # one model per scene, shared by a Dask worker's threads
+        pos0, quat0 = m.body_pos.copy(), m.body_quat.copy()
+        try:
+            mujoco.mj_resetData(m, d)
+            for name, (x, y, z, yaw) in layout.items():
+                quat = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
+                if name == ROBOT_KEY:
+                    continue
+                b = m.body(name).id
+                if m.body_jntadr[b] >= 0 and m.jnt_type[m.body_jntadr[b]] == 0:  # free
+                    qa = m.jnt_qposadr[m.body_jntadr[b]]
+                    d.qpos[qa : qa + 7] = [x, y, z, *quat]
+                else:
+                    m.body_pos[b], m.body_quat[b] = [x, y, z], quat
+            if robot.base is not None and ROBOT_KEY in layout:
+                x, y, _, yaw = layout[ROBOT_KEY]
+                for j, q in zip(robot.base.joints, (x, y, yaw), strict=True):
+                    d.qpos[m.jnt_qposadr[m.joint(j).id]] = q
+            for j, q in zip(robot.arm_joints, robot.home_array(), strict=True):
+                d.qpos[m.jnt_qposadr[m.joint(j).id]] = q
+            mujoco.mj_forward(m, d)
+            mine = set(robot_geoms(robot, m).tolist())
+            hit = set()
+            for c in d.contact[: d.ncon]:
+                g1, g2 = int(c.geom1), int(c.geom2)
+                if (g1 in mine) == (g2 in mine) or c.dist >= 0:
+                    continue
+                other = g2 if g1 in mine else g1
+                if m.geom_type[other] == mujoco.mjtGeom.mjGEOM_PLANE:
+                    continue
+                body = int(m.body_rootid[m.geom_bodyid[other]])
+                name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, other)
+                hit.add(name or mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, body) or "world")
+            return sorted(hit)
+        finally:
+            m.body_pos[:], m.body_quat[:] = pos0, quat0
 
 
 def _draw(
