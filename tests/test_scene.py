@@ -444,3 +444,14 @@ def test_record_with_broken_scene_exits_2_with_one_line(
     assert f"{user_scene}: {path} (line {line}): {what}" in lines[0]
     assert "Traceback" not in proc.stderr
     assert not out.exists() and not out.with_name("out.mcap.part").exists()
+
+
+def test_a_geom_in_the_sensors_hidden_group_is_refused(user_scene: Path) -> None:
+    """Group 5 is smc's: no sensor sees it (parked objects, the teleop marker). A scene
+    geom put there would be invisible to the robot without a word: refused in one line."""
+    xml = user_scene.parent / "scene.xml"
+    break_scene(xml, '<geom name="floor"', '<geom name="floor" group="5"')
+    with pytest.raises(SceneError) as info:
+        load_scene(user_scene)
+    msg = str(info.value)
+    assert "\n" not in msg and "geom floor in group 5, which no sensor sees" in msg, msg

@@ -48,6 +48,9 @@ PYRAMID_STEPS = 3
 Layout = dict[str, tuple[float, float, float, float]]
 """Object name -> pose ``(x, y, z, yaw)`` [m, m, m, rad] of its bounding-box centre; for a
 mobile base, the key :data:`ROBOT_KEY` holds its start pose ``(x, y, 0, yaw)``."""
+HIDDEN_GROUP = 5
+"""The geom group no sensor sees (camera, lidar): smc's own, for the teleop marker and
+parked objects (the viewer still shows it). Scene and robot files may not use it."""
 ROBOT_KEY = "robot"
 """The layout key of a mobile base's start pose (no object may have this name)."""
 
@@ -820,6 +823,15 @@ def _scene(
     objects, camera, scale, success = _parse(raw, where, yaml_text)
     if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera.name) < 0:
         raise SceneError(f"{where}: camera {camera.name!r} not in the MJCF")
+    hidden = [
+        mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom {g}"
+        for g in np.flatnonzero(model.geom_group == HIDDEN_GROUP)
+    ]
+    if hidden:
+        raise SceneError(
+            f"{where}: geom {', '.join(hidden)} in group {HIDDEN_GROUP}, which no sensor sees "
+            f"(smc's own: parked objects, the teleop marker); use groups 0-{HIDDEN_GROUP - 1}"
+        )
     return Scene(
         name=str(raw["name"]),
         yaml_path=None,

@@ -20,7 +20,15 @@ from smccli.world.lidar import Lidar, LidarReading
 from smccli.world.noise import NoisySensors
 from smccli.world.robot import robot_geoms
 from smccli.world.robot_model import RobotModel
-from smccli.world.scene import ROBOT_KEY, Condition, Layout, ObjectSpec, Scene, nominal_layout
+from smccli.world.scene import (
+    HIDDEN_GROUP,
+    ROBOT_KEY,
+    Condition,
+    Layout,
+    ObjectSpec,
+    Scene,
+    nominal_layout,
+)
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
 
 ON_TOP_TOL = 0.015
@@ -32,9 +40,6 @@ REST_SPEED = (0.02, 0.2)
 """At rest: linear [m/s] and angular [rad/s] speed below these."""
 MARKER_BODY = "smc_target"
 """The teleop target marker's body (``Sim(target_marker=True)``)."""
-HIDDEN_GROUP = 5
-"""The geom group no sensor sees (camera, lidar): the teleop marker's, and parked
-objects' (the viewer still shows it). Scene and robot files leave it empty."""
 MARKER_RADIUS = 0.025
 """Its sphere's radius [m]: big enough to pick with the mouse."""
 CONTROL_PERIOD = 0.01
