@@ -12,13 +12,23 @@ from smccli.world.controller import (
     TRACKED,
     CartesianController,
     reachable,
-    rotation_error,
     target_rotation,
     wrap,
 )
 from smccli.world.scene import Scene, load_scene
 from smccli.world.sensors import PoiCommand
 from smccli.world.sim import Sim
+
+
+def rotation_error(R_target: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Axis-angle vector of ``R_target Rᵀ`` (world frame), shape (3,) [rad]: the reference
+    the controller's own orientation error is tested against."""
+    quat = np.empty(4)
+    mujoco.mju_mat2Quat(quat, (R_target @ R.T).ravel())
+    err = np.empty(3)
+    mujoco.mju_quat2Vel(err, quat, 1.0)
+    return err
+
 
 # Every built-in robot: the controller knows only what its robot file says.
 SCENES = ("pick_place", "bench_pick_panda")

@@ -20,7 +20,7 @@ import bisect
 import hashlib
 import io
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -488,8 +488,3 @@ def _rows(msg: Any, channels: int, dtype: Any) -> np.ndarray:
     raw = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.step)[:, :row]
     img = raw.copy().view(dt).reshape(msg.height, msg.width, channels)
     return img[:, :, 0] if channels == 1 else img
-
-
-def topics_of(topic_map: TopicMap) -> Iterable[str]:
-    """The bag topics a map reads."""
-    return topic_map.topics.values()

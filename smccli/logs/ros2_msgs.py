@@ -93,11 +93,6 @@ def msgdef(datatype: str) -> str:
     return "\n".join(parts)
 
 
-def datatypes() -> list[str]:
-    """Every type with a definition here, as ``pkg/msg/Type``."""
-    return [n.replace("/", "/msg/", 1) for n in _DEFS]
-
-
 EXPORT_TOPICS: dict[str, tuple[tuple[str, str], ...]] = {
     "/teleop/command": (
         ("/teleop/target", "geometry_msgs/msg/PoseStamped"),

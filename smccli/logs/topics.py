@@ -215,10 +215,3 @@ def decode_color(data: bytes) -> np.ndarray | None:
     if img is None or img.ndim != 3:
         return None
     return np.ascontiguousarray(img[..., 2::-1])
-
-
-def decode_depth(data: bytes) -> np.ndarray | None:
-    img = decode_image(data)
-    if img is None or img.ndim != 2:
-        return None
-    return (img.astype(np.float32) / np.float32(DEPTH_SCALE)).astype(np.float32)

@@ -54,15 +54,6 @@ def wrap(angle: float) -> float:
     return math.pi - (math.pi - angle) % (2 * math.pi)
 
 
-def rotation_error(R_target: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """Axis-angle vector of ``R_target Rᵀ`` (world frame), shape (3,) [rad]."""
-    quat = np.empty(4)
-    mujoco.mju_mat2Quat(quat, (R_target @ R.T).ravel())
-    err = np.empty(3)
-    mujoco.mju_quat2Vel(err, quat, 1.0)
-    return err
-
-
 def poi_pose(data: mujoco.MjData, site_id: int) -> np.ndarray:
     """POI ``[x, y, z, yaw]`` from a site's pose; yaw is that of the site's x axis."""
     R = data.site_xmat[site_id].reshape(3, 3)
