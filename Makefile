@@ -45,7 +45,7 @@ test: setup
 # The suite beside CPU burners, twice as many as cores by default (BURNERS=N to change):
 # no test may depend on the machine's speed. The burners are bounded (timeout) and stopped
 # when the suite ends.
-BURN_S ?= 3600
+BURN_S ?= 10800
 BURNERS ?= $(shell echo $$((2 * $$(nproc))))
 test-under-load: setup
 	@set -e; pids=""; \

@@ -458,3 +458,66 @@ def test_cut_file_reads_whole_chunks(demo: tuple[Path, dict], tmp_path: Path) ->
     assert log.truncated and warnings and "cut.mcap" in warnings[0]
     assert 0 < len(log.commands) < len(wr["cmd"])
     assert json.dumps(log_summary(cut)["truncated"]) == "true"
+
+
+def _one_message_per_chunk(src: Path, out: Path) -> Path:
+    """``src`` rewritten by mcap's own writer with every message in a chunk of its own (as
+    a writer that chunks per topic would), so the ground truth is in chunks of its own."""
+    with open(src, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        metadata = list(reader.iter_metadata())
+        attachments = list(reader.iter_attachments())
+        messages = list(reader.iter_messages(log_time_order=False))
+    with open(out, "wb") as f:
+        w = Writer(f, chunk_size=1)
+        w.start()
+        for s in summary.schemas.values():
+            w.register_schema(s.name, s.encoding, s.data)
+        for c in summary.channels.values():
+            w.register_channel(c.topic, c.message_encoding, c.schema_id, c.metadata)
+        for m in metadata:
+            w.add_metadata(m.name, m.metadata)
+        for a in attachments:
+            w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
+        for _, channel, msg in messages:
+            w.add_message(channel.id, msg.log_time, msg.data, msg.publish_time, msg.sequence)
+        w.finish()
+    return out
+
+
+def test_a_reader_of_some_topics_leaves_the_other_chunks_compressed(tmp_path, monkeypatch):
+    """compile reads the topics it needs (``READ_TOPICS``): a chunk holding only ground truth
+    is never decompressed, yet counted (its message indexes say how many it holds); what is
+    read is what reading every chunk gives."""
+    import smccli.logs.reader as reader
+    from smccli.learn.compile import READ_TOPICS
+
+    log = _one_message_per_chunk(
+        REPO / "sample_logs" / "bench_pick" / "demo.mcap", tmp_path / "split.mcap"
+    )
+    with open(log, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    topic_of = {c.id: c.topic for c in summary.channels.values()}
+    read: list[set[str]] = []
+    plain = reader._chunk_records
+
+    def counted(chunk):
+        records = plain(chunk)
+        read.append({topic_of[r.channel_id] for r in records if hasattr(r, "channel_id")})
+        return records
+
+    monkeypatch.setattr(reader, "_chunk_records", counted)
+    some = read_log(log, topics=READ_TOPICS, lazy_frames=True)
+    assert read and not [t for t in read if t <= {tp.GROUND_TRUTH}]
+    ground_truth_chunks = some.topic_counts[tp.GROUND_TRUTH]
+    assert ground_truth_chunks > 50 and some.ground_truth == []
+    read.clear()
+    every = read_log(log)
+    assert len(read) >= ground_truth_chunks + 50 and len(every.ground_truth) == ground_truth_chunks
+    assert some.topic_counts == every.topic_counts
+    np.testing.assert_array_equal(some.poi, every.poi)
+    assert [c.target.tolist() for c in some.commands] == [c.target.tolist() for c in every.commands]
+    assert len(some.camera) == len(every.frames) and some.marks == every.marks

@@ -1,7 +1,9 @@
 """Reading logs: ``read_log`` (decoded, checked), ``log_summary`` (counts only), ``strip_topic``.
 
 Reads in file order with mcap's non-seeking ``StreamReader``: a log cut short by a killed
-recorder (no summary, torn last chunk) still yields every whole chunk before the cut.
+recorder (no summary, torn last chunk) still yields every whole chunk before the cut. The
+message indexes that follow each chunk say which channels it holds: a reader asking for
+some topics leaves the chunks that hold none of them compressed.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from mcap.records import (
     Header,
     McapRecord,
     Message,
+    MessageIndex,
     Metadata,
     Schema,
 )
@@ -143,6 +146,10 @@ class _Raw:
     messages: list[Message] = field(default_factory=list)
     truncated: bool = False
     cut_at: int = 0
+    skipped: dict[int, int] = field(default_factory=dict)
+    """Messages per channel in chunks left compressed (no wanted topic in them)."""
+    chunks_read: int = 0
+    """Chunks decompressed."""
 
     def topic(self, msg: Message) -> str:
         """Topic of ``msg``'s channel (``_check_channels`` first: KeyError on an unknown one)."""
@@ -223,35 +230,46 @@ def _plain_chunk_records(chunk: Chunk) -> list[McapRecord] | None:
     return out
 
 
-def _scan(path: Path, data: bytes) -> _Raw:
+def _scan(path: Path, data: bytes, wanted: set[str] | None = None) -> _Raw:
+    """The file's records in file order. With ``wanted`` topics, a chunk is decompressed
+    only if it may hold one: its message indexes (the records that follow a chunk) name
+    its channels, and a chunk whose channels are all known and all unwanted is counted
+    from its indexes and skipped. A chunk without indexes (a torn last chunk, a writer
+    that writes none) or with a channel not yet defined is read."""
     raw = _Raw()
     stream = io.BytesIO(data)
     reader = StreamReader(stream, validate_crcs=True, emit_chunks=True)
     footer = False
+    pending: list[Any] = []  # [chunk, {channel id: messages}] until its indexes are read
+
+    def settle() -> None:
+        if not pending:
+            return
+        chunk, index = pending
+        pending.clear()
+        known = bool(index) and all(c in raw.channels for c in index)
+        if wanted is not None and known and not {raw.channels[c].topic for c in index} & wanted:
+            for c, n in index.items():
+                raw.skipped[c] = raw.skipped.get(c, 0) + n
+            return
+        raw.chunks_read += 1
+        for r in _chunk_records(chunk):
+            _add_record(raw, r)
+
     try:
-        for rec in reader.records:
-            if isinstance(rec, Chunk):
-                for r in _chunk_records(rec):
-                    if isinstance(r, Message):
-                        raw.messages.append(r)
-                    elif isinstance(r, Channel):
-                        raw.channels[r.id] = r
-                    elif isinstance(r, Schema):
-                        raw.schemas[r.id] = r
-            elif isinstance(rec, Message):
-                raw.messages.append(rec)
-            elif isinstance(rec, Channel):
-                raw.channels[rec.id] = rec
-            elif isinstance(rec, Schema):
-                raw.schemas[rec.id] = rec
-            elif isinstance(rec, Metadata):
-                raw.metadata[rec.name] = dict(rec.metadata)
-            elif isinstance(rec, Attachment):
-                raw.attachments.append(rec)
-            elif isinstance(rec, Header):
-                raw.header = rec
-            elif isinstance(rec, Footer):
-                footer = True
+        try:
+            for rec in reader.records:
+                if isinstance(rec, MessageIndex) and pending:
+                    pending[1][rec.channel_id] = len(rec.records)
+                    continue
+                settle()
+                if isinstance(rec, Chunk):
+                    pending[:] = [rec, {}]
+                    continue
+                _add_record(raw, rec)
+                footer = footer or isinstance(rec, Footer)
+        finally:
+            settle()  # the last chunk before the footer or the cut
     except InvalidMagic:
         if raw.header is None:
             raise LogError(f"{path}: not an MCAP file (bad magic bytes)") from None
@@ -273,6 +291,22 @@ def _scan(path: Path, data: bytes) -> _Raw:
         raw.truncated = True
         raw.cut_at = stream.tell()
     return raw
+
+
+def _add_record(raw: _Raw, rec: McapRecord) -> None:
+    """A record (from a chunk or outside one) into ``raw``."""
+    if isinstance(rec, Message):
+        raw.messages.append(rec)
+    elif isinstance(rec, Channel):
+        raw.channels[rec.id] = rec
+    elif isinstance(rec, Schema):
+        raw.schemas[rec.id] = rec
+    elif isinstance(rec, Metadata):
+        raw.metadata[rec.name] = dict(rec.metadata)
+    elif isinstance(rec, Attachment):
+        raw.attachments.append(rec)
+    elif isinstance(rec, Header):
+        raw.header = rec
 
 
 def _check_channels(path: Path, raw: _Raw) -> None:
@@ -460,7 +494,9 @@ def read_log(
     on_warning: Callable[[str], None] | None = None,
     lazy_frames: bool = False,
 ) -> Log:
-    """Read and check a log; decode only ``topics`` (all if None).
+    """Read and check a log; decode only ``topics`` (all if None), and decompress only
+    the chunks that may hold them (:func:`_scan`): a check of a message (its schema, its
+    time order) covers the chunks read.
 
     Raises LogError (one line naming the file; for a message also its topic and time) for
     a missing file, not MCAP, empty, corrupt, no readable message, a message on an unknown
@@ -477,8 +513,9 @@ def read_log(
     path = Path(path)
     warn = on_warning or _log.warning
     data = _read_bytes(path)
-    raw = _scan(path, data)
-    if not raw.messages:
+    wanted = None if topics is None else set(topics)
+    raw = _scan(path, data, wanted)
+    if not raw.messages and not raw.skipped:
         why = (
             f"truncated at byte {raw.cut_at} of {len(data)}, before its first chunk ended"
             if raw.truncated
@@ -501,11 +538,12 @@ def read_log(
     counts: dict[str, int] = {c.topic: 0 for c in raw.channels.values()}
     for m in raw.messages:
         counts[raw.topic(m)] += 1
+    for cid, n in raw.skipped.items():  # chunks left compressed: counted by their indexes
+        counts[raw.channels[cid].topic] += n
     missing = [t for t in required_topics if counts.get(t, 0) == 0]
     if missing:
         have = ", ".join(sorted(t for t, n in counts.items() if n)) or "none"
         raise LogError(f"{path}: topic {', '.join(missing)} missing (topics present: {have})")
-    wanted = None if topics is None else set(topics)
     d = _Decoder(path, raw, wanted, warn)
     for m in raw.messages:
         d.add(m)
