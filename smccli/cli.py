@@ -405,6 +405,17 @@ def _print_verification(v: Any) -> None:
 
 
 @app.command()
+def verify(
+    log: Annotated[Path, typer.Argument(help="A recorded log (.mcap).", dir_okay=False)],
+) -> None:
+    """Play a log's commands again from its first state: does it mean what it recorded?
+    Exit 1 when the POI or a finger strays beyond its tolerance."""
+    from smccli.execute.verify import verify_log
+
+    _print_verification(verify_log(log))
+
+
+@app.command()
 def replay(
     tree: Annotated[
         Path | None, typer.Argument(help="Tree file (tree.json); none with --verify.")
@@ -450,8 +461,8 @@ def replay(
     verify: Annotated[
         Path | None,
         typer.Option(
-            help="Play a recorded log's commands again from its first state and report how "
-            "far the robot strays from what it recorded (exit 1 beyond the tolerance).",
+            help="The same as `smc verify LOG` (kept as an alias): play a recorded log's "
+            "commands again and report how far the robot strays (exit 1 beyond tolerance).",
             dir_okay=False,
         ),
     ] = None,

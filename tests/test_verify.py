@@ -1,4 +1,5 @@
-"""``smc replay --verify LOG``: a log's commands played again from its first state.
+"""``smc verify LOG`` (alias ``smc replay --verify LOG``): a log's commands played again
+from its first state.
 
 A log recorded by this code replays to the bit; the sample logs (some recorded by an
 earlier controller) keep their POI within a millimetre; a log whose commands were edited
@@ -69,7 +70,7 @@ def test_a_log_recorded_here_replays_to_the_bit(reseeded_logs) -> None:
 
 @pytest.mark.parametrize("log", ["bench_pick/demo.mcap", "rooms/demo1.mcap"])
 def test_sample_logs_mean_what_they_recorded(log) -> None:
-    r = smc("replay", "--verify", SAMPLE_LOGS / log)
+    r = smc("verify", SAMPLE_LOGS / log)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "reproduces what it recorded" in r.stdout
     assert verify_log(SAMPLE_LOGS / log).max_poi_error < 0.2 * POI_TOLERANCE
@@ -82,14 +83,16 @@ def test_edited_commands_are_flagged_from_the_edit_on(tmp_path) -> None:
     assert v.divergent and v.first_divergence is not None
     assert 3.0 < v.first_divergence < 4.0, v.first_divergence
     assert v.max_poi_error > 0.015
-    r = smc("replay", "--verify", edited)
-    assert r.returncode == 1 and "diverges" in r.stdout, r.stdout + r.stderr
+    for args in (["verify", edited], ["replay", "--verify", edited]):  # the command, its alias
+        r = smc(*args)
+        assert r.returncode == 1 and "diverges" in r.stdout, r.stdout + r.stderr
 
 
 def test_bad_input_is_one_line(tmp_path, sample_trees) -> None:
     missing = tmp_path / "nope.mcap"
-    r = smc("replay", "--verify", missing)
-    assert r.returncode == 2 and str(missing) in r.stderr and "Traceback" not in r.stderr
+    for args in (["verify", missing], ["replay", "--verify", missing]):
+        r = smc(*args)
+        assert r.returncode == 2 and str(missing) in r.stderr and "Traceback" not in r.stderr
     r = smc("replay", sample_trees["bench_pick"], "--verify", SAMPLE_LOGS / "rooms/demo1.mcap")
     assert r.returncode == 2 and "give no tree" in r.stderr
     # Without its ground truth a log has no first state to start from.
