@@ -26,7 +26,7 @@ from mcap.writer import CompressionType, Writer
 from smccli.errors import LogError
 from smccli.logs import log_summary, read_log
 from smccli.logs import topics as tp
-from smccli.logs.reader import _Raw, _read_bytes, _scan
+from smccli.logs.records import RawLog, read_bytes, scan_records
 from smccli.logs.robot import robot_model_of
 
 REPO = Path(__file__).resolve().parent.parent
@@ -36,8 +36,8 @@ REJECTED_MJCF = b"<mujoco><worldbody><geom type='box'/></worldbody></mujoco>"
 
 
 @functools.cache
-def sample_raw() -> _Raw:
-    return _scan(SAMPLE, _read_bytes(SAMPLE))
+def sample_raw() -> RawLog:
+    return scan_records(SAMPLE, read_bytes(SAMPLE))
 
 
 def nth(topic: str, k: int) -> int:

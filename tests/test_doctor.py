@@ -22,7 +22,7 @@ from mcap.stream_reader import StreamReader
 from smccli.learn.doctor import copy_log, diagnose, exit_code, repair
 from smccli.logs import log_summary, strip_topic
 from smccli.logs import topics as tp
-from smccli.logs.reader import _Raw, _read_bytes, _scan
+from smccli.logs.records import RawLog, read_bytes, scan_records
 
 DEMO = SAMPLE_LOGS / "pick_place" / "demo1.mcap"
 CHECKS = (
@@ -52,7 +52,7 @@ def assert_complete_copy(out: Path, src: Path) -> None:
     """``out`` is a valid indexed MCAP that plain mcap reads with CRCs checked, holding every
     message ``src`` yields before its cut (same order, topics, times and bytes), its
     attachments and metadata."""
-    raw = _scan(src, _read_bytes(src))
+    raw = scan_records(src, read_bytes(src))
     with open(out, "rb") as f:
         reader = make_reader(f, validate_crcs=True)
         assert reader.get_summary() is not None
@@ -192,7 +192,7 @@ def test_killed_recorder_part_is_repaired(tmp_path):
 
 def _rewrite(tmp_path: Path, change, src: Path = DEMO) -> Path:
     """``src`` with its records changed by ``change(raw)``, written as a valid MCAP."""
-    raw = _scan(src, _read_bytes(src))
+    raw = scan_records(src, read_bytes(src))
     change(raw)
     out = tmp_path / "changed.mcap"
     with open(out, "wb") as f:
@@ -200,23 +200,23 @@ def _rewrite(tmp_path: Path, change, src: Path = DEMO) -> Path:
     return out
 
 
-def _channel(raw: _Raw, topic: str) -> Channel:
+def _channel(raw: RawLog, topic: str) -> Channel:
     return next(c for c in raw.channels.values() if c.topic == topic)
 
 
-def _wrong_encoding(raw: _Raw) -> None:
+def _wrong_encoding(raw: RawLog) -> None:
     ch = _channel(raw, tp.COLOR)
     raw.channels[ch.id] = dataclasses.replace(ch, message_encoding="json")
 
 
-def _unknown_topic(raw: _Raw) -> None:
+def _unknown_topic(raw: RawLog) -> None:
     raw.channels[99] = Channel(
         id=99, topic="/my/extra", message_encoding="json", schema_id=0, metadata={}
     )
     raw.messages.append(Message(channel_id=99, sequence=0, log_time=1, publish_time=1, data=b"{}"))
 
 
-def _nan_joint(raw: _Raw) -> None:
+def _nan_joint(raw: RawLog) -> None:
     cid = _channel(raw, tp.JOINT_STATES).id
     i = next(i for i, m in enumerate(raw.messages) if m.channel_id == cid)
     msg = JointStates.FromString(raw.messages[i].data)
@@ -224,7 +224,7 @@ def _nan_joint(raw: _Raw) -> None:
     raw.messages[i] = dataclasses.replace(raw.messages[i], data=msg.SerializeToString())
 
 
-def _backwards(raw: _Raw) -> None:
+def _backwards(raw: RawLog) -> None:
     cid = _channel(raw, tp.POI).id
     i, j = [k for k, m in enumerate(raw.messages) if m.channel_id == cid][10:12]
     a, b = raw.messages[i], raw.messages[j]
@@ -232,11 +232,11 @@ def _backwards(raw: _Raw) -> None:
     raw.messages[j] = dataclasses.replace(b, log_time=a.log_time)
 
 
-def _interrupted(raw: _Raw) -> None:
+def _interrupted(raw: RawLog) -> None:
     raw.metadata[tp.END_METADATA_NAME] = {"end": "interrupted", "reason": "SIGINT"}
 
 
-def _no_scene_xml(raw: _Raw) -> None:
+def _no_scene_xml(raw: RawLog) -> None:
     raw.attachments = [a for a in raw.attachments if a.name != "scene.xml"]
 
 
@@ -291,6 +291,6 @@ def test_missing_file_is_a_diagnosis_not_an_exception(tmp_path):
 def test_repair_of_a_complete_log_copies_it(tmp_path):
     result = repair(DEMO, tmp_path / "copy.mcap")
     assert not result.truncated
-    assert result.messages == len(_scan(DEMO, _read_bytes(DEMO)).messages)
+    assert result.messages == len(scan_records(DEMO, read_bytes(DEMO)).messages)
     assert_complete_copy(result.path, DEMO)
     assert diagnose(result.path).status == "ok"

@@ -28,7 +28,8 @@ from smccli.errors import SmcError
 from smccli.learn.tree import load_tree, tree_from_dict
 from smccli.logs import LogWriter, log_summary, read_log
 from smccli.logs import topics as tp
-from smccli.logs.reader import _FAST_OK, _Raw, _scan
+from smccli.logs.checks import _FAST_OK
+from smccli.logs.records import RawLog, scan_records
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
 # numpy's overflow and invalid-value warnings mean garbage got through unnoticed.
@@ -112,7 +113,7 @@ def small_log() -> bytes:
 
 
 def copy_log(
-    raw: _Raw,
+    raw: RawLog,
     dst: Path,
     *,
     chunked: bool = True,
@@ -142,8 +143,8 @@ def copy_log(
 
 
 @functools.cache
-def small_raw(data: bytes) -> _Raw:
-    return _scan(Path("small.mcap"), data)
+def small_raw(data: bytes) -> RawLog:
+    return scan_records(Path("small.mcap"), data)
 
 
 @st.composite

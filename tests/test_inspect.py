@@ -493,7 +493,7 @@ def test_a_readable_log_without_a_topic_is_shown_with_a_warning(inputs, tmp_path
     """A viewer shows what a log holds (README, errors): a log without its camera, or
     without its scene attachment, is written with one warning line naming what is
     missing, exit 0; the recording holds what the log does hold."""
-    from smccli.logs.reader import strip_topic
+    from smccli.logs import strip_topic
 
     no_camera = strip_topic(inputs.demos[0], tmp_path / "no_camera.mcap", "/camera/color")
     rrd = tmp_path / "no_camera.rrd"

@@ -491,7 +491,7 @@ def test_a_reader_of_some_topics_leaves_the_other_chunks_compressed(tmp_path, mo
     """compile reads the topics it needs (``READ_TOPICS``): a chunk holding only ground truth
     is never decompressed, yet counted (its message indexes say how many it holds); what is
     read is what reading every chunk gives."""
-    import smccli.logs.reader as reader
+    import smccli.logs.records as records
     from smccli.learn.compile import READ_TOPICS
 
     log = _one_message_per_chunk(
@@ -502,14 +502,14 @@ def test_a_reader_of_some_topics_leaves_the_other_chunks_compressed(tmp_path, mo
     assert summary is not None
     topic_of = {c.id: c.topic for c in summary.channels.values()}
     read: list[set[str]] = []
-    plain = reader._chunk_records
+    plain = records._chunk_records
 
     def counted(chunk):
-        records = plain(chunk)
-        read.append({topic_of[r.channel_id] for r in records if hasattr(r, "channel_id")})
-        return records
+        out = plain(chunk)
+        read.append({topic_of[r.channel_id] for r in out if hasattr(r, "channel_id")})
+        return out
 
-    monkeypatch.setattr(reader, "_chunk_records", counted)
+    monkeypatch.setattr(records, "_chunk_records", counted)
     some = read_log(log, topics=READ_TOPICS, lazy_frames=True)
     assert read and not [t for t in read if t <= {tp.GROUND_TRUTH}]
     ground_truth_chunks = some.topic_counts[tp.GROUND_TRUTH]

@@ -17,9 +17,8 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from smccli.errors import LogError, OutputError, OutputExistsError
-from smccli.logs import read_log
+from smccli.logs import Log, read_log
 from smccli.logs import topics as tp
-from smccli.logs.reader import Log
 from smccli.logs.ros2_export import EXPORT_METADATA_NAME, ExportSummary, export_ros2
 from smccli.logs.ros2_msgs import EXPORT_MAP, EXPORT_TOPICS
 from smccli.logs.writer import LogWriter

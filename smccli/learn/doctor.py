@@ -33,15 +33,11 @@ from mcap.stream_reader import CRCValidationError, get_chunk_data_stream
 
 from smccli.errors import LogError, OutputError, SmcError
 from smccli.logs import topics as tp
-from smccli.logs.reader import (
-    Log,
-    _decode_points,
-    _Raw,
-    _read_bytes,
-    _scan,
-    copy_log,
-    read_log,
-)
+from smccli.logs.decode import decode_points
+from smccli.logs.log import Log
+from smccli.logs.reader import read_log
+from smccli.logs.records import RawLog, read_bytes, scan_records
+from smccli.logs.rewrite import copy_log
 from smccli.logs.ros2_bag import TopicMap, read_ros2_bag, resolve_bag
 from smccli.outputs import check_output, write_atomic
 
@@ -235,7 +231,7 @@ class _Context:
     path: Path
     data: bytes
     layout: _Layout
-    raw: _Raw | None = None
+    raw: RawLog | None = None
     log: Log | None = None
     read_error: str = ""
     warnings: list[str] = field(default_factory=list)
@@ -400,7 +396,7 @@ def _expected_schema(topic: str) -> tuple[str, str, str] | None:
     return None
 
 
-def _schema_problem(raw: _Raw, ch: Channel) -> str | None:
+def _schema_problem(raw: RawLog, ch: Channel) -> str | None:
     """What differs from what the writer uses for ``ch.topic``, None if nothing (or not ours)."""
     want = _expected_schema(ch.topic)
     if want is None:
@@ -442,7 +438,7 @@ def _check_schemas(c: _Context) -> Check:
     return Check("schemas", "ok", f"{n} channels with the expected encoding and schema{note}")
 
 
-def _counts(raw: _Raw) -> dict[int, int]:
+def _counts(raw: RawLog) -> dict[int, int]:
     counts: dict[int, int] = {}
     for m in raw.messages:
         counts[m.channel_id] = counts.get(m.channel_id, 0) + 1
@@ -516,7 +512,7 @@ def _finite(topic: str, t: float, data: bytes) -> bool:
     if not all(math.isfinite(x) for x in _floats(msg)):
         return False
     if topic == tp.POINTS:  # packed float32 coordinates, not protobuf floats
-        return bool(np.all(np.isfinite(_decode_points(t, msg).points)))
+        return bool(np.all(np.isfinite(decode_points(t, msg).points)))
     return True
 
 
@@ -616,7 +612,7 @@ def diagnose(path: str | os.PathLike[str], topic_map: TopicMap | None = None) ->
     try:
         if topic_map is not None:
             path = resolve_bag(path)
-        data = _read_bytes(path)
+        data = read_bytes(path)
     except SmcError as e:
         return _diagnosis(path, [Check("file", "error", _one_line(path, str(e)))])
     if not data.startswith(_MAGIC):
@@ -626,7 +622,7 @@ def diagnose(path: str | os.PathLike[str], topic_map: TopicMap | None = None) ->
         return _diagnose_bag(path, data, topic_map)
     c = _Context(path=path, data=data, layout=_layout(data))
     try:
-        c.raw = _scan(path, data)
+        c.raw = scan_records(path, data)
     except SmcError as e:
         c.read_error = _one_line(path, str(e))
     except Exception as e:  # e.g. zstd's own error on a damaged chunk, which the reader lets by
@@ -692,9 +688,9 @@ def repair(
     if _same_file(src, out):
         raise OutputError(f"{out}: is the log being repaired; write the repair elsewhere")
     check_output(out, force=force)
-    data = _read_bytes(src)
+    data = read_bytes(src)
     try:
-        raw = _scan(src, data)
+        raw = scan_records(src, data)
     except SmcError:
         raise
     except Exception as e:  # e.g. zstd's own error on a damaged chunk, which the reader lets by

@@ -10,7 +10,7 @@ import mujoco
 import numpy as np
 
 from smccli.errors import LogError
-from smccli.logs.reader import Log
+from smccli.logs.log import Log
 from smccli.world.robot_model import RobotModel, robot_body_ids
 from smccli.world.sensors import RobotGeometry
 

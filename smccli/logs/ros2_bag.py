@@ -33,7 +33,8 @@ from scipy.spatial.transform import Rotation
 
 from smccli.errors import LogError, SceneError
 from smccli.logs import topics as tp
-from smccli.logs.reader import Log, PointCloudMsg, Scan, _unwrap_yaw
+from smccli.logs.decode import unwrap_yaw
+from smccli.logs.log import Log, PointCloudMsg, Scan
 from smccli.schemas import validate_yaml
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
@@ -254,7 +255,7 @@ def read_ros2_bag(
         commands=b.commands(),
         joint_states=b.joints,
         poi_t=np.array(b.poi_t, dtype=float),
-        poi=_unwrap_yaw(np.array(b.poi, dtype=float).reshape(-1, 4)),
+        poi=unwrap_yaw(np.array(b.poi, dtype=float).reshape(-1, 4)),
         frames=b.frames(),
         weight_t=np.array(b.weight_t, dtype=float),
         weight=np.array(b.weight, dtype=float),

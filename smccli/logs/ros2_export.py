@@ -45,7 +45,10 @@ from mcap_ros2.writer import Writer as Ros2Writer
 from smccli import __version__
 from smccli.errors import LogError, OutputError, OutputExistsError
 from smccli.logs import topics as tp
-from smccli.logs.reader import _BadContent, _decode_points, _read_bytes, _scan, read_log
+from smccli.logs.checks import BadContent
+from smccli.logs.decode import decode_points
+from smccli.logs.reader import read_log
+from smccli.logs.records import read_bytes, scan_records
 from smccli.logs.ros2_msgs import EXPORT_TOPICS, export_map, msgdef
 from smccli.logs.writer import part_path
 from smccli.outputs import check_output
@@ -120,7 +123,7 @@ def _yaw_pose(target: list[float]) -> dict[str, Any]:
 
 def _point_cloud(t_ns: int, msg: Any) -> dict[str, Any]:
     """sensor_msgs/PointCloud2 of a foxglove PointCloud (via the reader's layout checks)."""
-    pc = _decode_points(t_ns / 1e9, msg)
+    pc = decode_points(t_ns / 1e9, msg)
     n = len(pc.points)
     names = ["x", "y", "z"]
     if pc.colors is None:
@@ -273,7 +276,7 @@ class _Converter:
     def points(self, t_ns: int, msg: Any) -> list[dict[str, Any]]:
         try:
             return [_point_cloud(t_ns, msg)]
-        except _BadContent as e:
+        except BadContent as e:
             raise LogError(f"{self.path}: point cloud at t={t_ns / 1e9:.3f} s: {e}") from None
 
 
@@ -330,8 +333,8 @@ def export_ros2(
     part = part_path(out)
     _check_paths(log, out, part, force)
     checked = read_log(log, on_warning=on_warning)  # the whole check: LogError, one line
-    data = _read_bytes(log)
-    raw = _scan(log, data)
+    data = read_bytes(log)
+    raw = scan_records(log, data)
 
     types = {ros: kind for ros_topics in EXPORT_TOPICS.values() for ros, kind in ros_topics}
     counts: dict[str, int] = {}
