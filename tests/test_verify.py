@@ -22,8 +22,8 @@ from mcap.writer import Writer  # noqa: E402
 
 from smccli.errors import LogError  # noqa: E402
 from smccli.execute.verify import POI_TOLERANCE, verify_log  # noqa: E402
-from smccli.logs import topics as tp  # noqa: E402
 from smccli.logs import strip_topic  # noqa: E402
+from smccli.logs import topics as tp  # noqa: E402
 
 
 def _edit_commands(src: Path, dst: Path, after: float, dx: float) -> None:
