@@ -55,7 +55,8 @@ def _simulated_demo(path: Path, *, decisions: bool) -> None:
     from smccli.logs import LogWriter
     from smccli.logs import topics as tp
     from smccli.logs.writer import scene_attachments
-    from smccli.world.scene import load_scene, nominal_layout
+    from smccli.world.layout import nominal_layout
+    from smccli.world.scene import load_scene
     from smccli.world.sensors import PoiCommand, SaliencyMark
     from smccli.world.sim import Sim
 

@@ -29,7 +29,8 @@ from smccli.learn.tree import ROOT, load_tree  # noqa: E402
 from smccli.logs import read_log  # noqa: E402
 from smccli.perception.colours import colour_name, dominant_rgb  # noqa: E402
 from smccli.record.operators import load_script, run_script, script_layout  # noqa: E402
-from smccli.world.scene import builtin_names, load_scene, sample_layout  # noqa: E402
+from smccli.world.layout import sample_layout  # noqa: E402
+from smccli.world.scene import builtin_names, load_scene  # noqa: E402
 from smccli.world.sim import Sim  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent

@@ -20,14 +20,8 @@ from smccli.learn.tree import ROOT, load_tree
 from smccli.logs import read_log
 from smccli.perception.scan import pose_compose
 from smccli.record.operators import load_script, parse_script, run_script, script_layout
-from smccli.world.scene import (
-    ROBOT_KEY,
-    SCENES_DIR,
-    load_scene,
-    load_scene_from_text,
-    nominal_layout,
-    sample_layout,
-)
+from smccli.world.layout import nominal_layout, sample_layout
+from smccli.world.scene import ROBOT_KEY, SCENES_DIR, load_scene, load_scene_from_text
 from smccli.world.sim import OdometryDrift, Sim
 
 DEMOS = sorted((SAMPLE_LOGS / "rooms").glob("demo*.mcap"))
@@ -259,7 +253,7 @@ def test_starts_inside_a_wall_are_drawn_again(tmp_path):
     """A start range over room 1's walls (x -1.2..3.2 m, y -1.7..1.7 m; walls at x = -1, 3
     and y = +-1.5): about a third of the starts drawn from it put the base in a wall. Each
     layout's start is free: the simulator placed there touches nothing."""
-    from smccli.world.scene import start_collisions
+    from smccli.world.layout import start_collisions
 
     path = _rooms_with_start(tmp_path, [-1.2, 3.2], [-1.7, 1.7], "wide")
     scene = load_scene(path)

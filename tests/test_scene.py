@@ -18,6 +18,7 @@ import pytest
 from smccli.errors import SceneError, SmcError
 from smccli.schemas import load_schema, parse_yaml, schema_problem, validate_yaml
 from smccli.world.controller import reachable
+from smccli.world.layout import load_layout_file, nominal_layout, sample_layout
 from smccli.world.scene import (
     RELATIONS,
     ROBOT_KEY,
@@ -25,11 +26,8 @@ from smccli.world.scene import (
     SHAPES,
     builtin_names,
     list_scenes,
-    load_layout_file,
     load_scene,
     load_scene_from_text,
-    nominal_layout,
-    sample_layout,
 )
 
 SCENES = ["bench_pick", "bench_pick_panda", "pick_place", "rooms", "weigh_sort"]

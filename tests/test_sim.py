@@ -6,7 +6,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from smccli.world.scene import load_scene, nominal_layout
+from smccli.world.layout import nominal_layout
+from smccli.world.scene import load_scene
 from smccli.world.sensors import PoiCommand
 from smccli.world.sim import HIDDEN_GROUP, Sim
 

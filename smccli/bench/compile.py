@@ -214,7 +214,8 @@ def compile_scaling(sizes: list[int], workers: int | None = None) -> list[dict]:
 def separability(n_poses: int, seed: int = 0) -> dict:
     """D_P (cluster part) same-object vs different-object percentiles over random poses."""
     from smccli.perception import PerceptionParams, clusters_from_frame, d_cluster
-    from smccli.world.scene import load_scene, sample_layout
+    from smccli.world.layout import sample_layout
+    from smccli.world.scene import load_scene
     from smccli.world.sim import Sim
 
     params = PerceptionParams()

@@ -30,14 +30,13 @@ from smccli.execute.teach import TeachConfig, Teaching, check_teach
 from smccli.execute.teach import teach as run_teaching
 from smccli.learn.tree import Edge, Tree, digest, load_tree
 from smccli.outputs import check_output, write_atomic
+from smccli.world.layout import load_layout_file, sample_layout
 from smccli.world.scene import (
     Layout,
     Scene,
     builtin_names,
-    load_layout_file,
     load_scene,
     robot_identity,
-    sample_layout,
     sensor_identity,
 )
 from smccli.world.sensors import PoiCommand

@@ -23,7 +23,8 @@ import numpy as np
 from smccli.errors import ScriptError
 from smccli.schemas import SchemaProblem, YamlDocument, check_yaml, key_path, parse_yaml
 from smccli.world.controller import home_poi, reachable, wrap
-from smccli.world.scene import ROBOT_KEY, Layout, Scene, nominal_layout, sample_layout
+from smccli.world.layout import nominal_layout, sample_layout
+from smccli.world.scene import ROBOT_KEY, Layout, Scene
 from smccli.world.sensors import PoiCommand, SaliencyMark, hand_in_base, hand_in_world
 from smccli.world.sim import Sim
 

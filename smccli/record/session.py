@@ -24,7 +24,8 @@ from smccli.errors import ScriptError
 from smccli.logs import LogWriter, log_summary
 from smccli.logs.writer import scene_attachments
 from smccli.outputs import check_output
-from smccli.world.scene import Layout, Scene, load_scene, nominal_layout, sample_layout
+from smccli.world.layout import nominal_layout, sample_layout
+from smccli.world.scene import Layout, Scene, load_scene
 from smccli.world.sim import Sim
 
 if TYPE_CHECKING:

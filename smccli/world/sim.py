@@ -16,19 +16,12 @@ import numpy as np
 
 from smccli.errors import SceneError
 from smccli.world.controller import CartesianController, poi_pose, wrap
+from smccli.world.layout import nominal_layout
 from smccli.world.lidar import Lidar, LidarReading
 from smccli.world.noise import NoisySensors
 from smccli.world.robot import robot_geoms
 from smccli.world.robot_model import RobotModel
-from smccli.world.scene import (
-    HIDDEN_GROUP,
-    ROBOT_KEY,
-    Condition,
-    Layout,
-    ObjectSpec,
-    Scene,
-    nominal_layout,
-)
+from smccli.world.scene import HIDDEN_GROUP, ROBOT_KEY, Condition, Layout, ObjectSpec, Scene
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
 
 ON_TOP_TOL = 0.015
