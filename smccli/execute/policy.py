@@ -37,6 +37,8 @@ from smccli.learn.params import SmcParams
 from smccli.learn.smc import TWO_PI, Action, goal_from_object, pose_from_pose
 from smccli.learn.tree import ROOT, Edge, Tree
 from smccli.perception import Cluster, clusters_from_frame
+from smccli.perception.distance import MIN_EXTENT
+from smccli.perception.histogram import BC_MIN
 from smccli.perception.room import d_room, room_histogram
 from smccli.perception.scan import Scan2D, align_scans, chamfer, map_goal
 from smccli.world.controller import reachable, wrap
@@ -59,10 +61,6 @@ STOPS = ("no_contingent_smc", "target_unreachable")
 
 
 # --- matching (eq. 36, 39, 45), vectorised over the candidate edges ------------------------
-
-
-_BC_MIN = 1e-6
-_MIN_EXTENT = 1e-3
 
 
 @dataclass(frozen=True)
@@ -92,7 +90,7 @@ class EdgeStack:
             if c is not None:
                 h = np.asarray(c.histogram, dtype=np.float64)
                 hist[i] = np.sqrt(h / max(float(h.sum()), 1e-300))
-                ext[i] = np.log(np.maximum(np.asarray(c.extents, dtype=np.float64), _MIN_EXTENT))
+                ext[i] = np.log(np.maximum(np.asarray(c.extents, dtype=np.float64), MIN_EXTENT))
         weights = [e.smc.perception.weight for e in edges]
         return cls(
             edges=edges,
@@ -121,9 +119,9 @@ def match_edges(
             hc = np.array([c.histogram for c in clusters], dtype=np.float64)
             hc = np.sqrt(hc / np.maximum(hc.sum(axis=1, keepdims=True), 1e-300))
             bc = stack.sqrt_hist @ hc.T  # (E, C) Bhattacharyya coefficients
-            d_h = np.where(bc > 1.0 - 1e-12, 0.0, -np.log(np.maximum(bc, _BC_MIN)))
+            d_h = np.where(bc > 1.0 - 1e-12, 0.0, -np.log(np.maximum(bc, BC_MIN)))
             ec = np.log(
-                np.maximum(np.array([c.extents for c in clusters], dtype=np.float64), _MIN_EXTENT)
+                np.maximum(np.array([c.extents for c in clusters], dtype=np.float64), MIN_EXTENT)
             )
             d_e = np.abs(stack.log_ext[:, None, :] - ec[None, :, :]).max(axis=2)
             dc = d_h / pp.hist_scale + d_e / pp.extent_scale

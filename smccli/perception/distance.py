@@ -8,7 +8,7 @@ from smccli.perception.clusters import Cluster
 from smccli.perception.histogram import d_histogram
 from smccli.perception.params import PerceptionParams
 
-_MIN_EXTENT = 1e-3
+MIN_EXTENT = 1e-3
 """Extents are floored at 1 mm so that log-ratios stay finite [m]."""
 
 
@@ -19,8 +19,8 @@ def d_extents(a: np.ndarray, b: np.ndarray) -> float:
     what the measurement error of a depth camera looks like (pixels, not millimetres).
     The footprint sides are sorted (length >= width), so yaw does not matter.
     """
-    ea = np.maximum(np.asarray(a, dtype=np.float64), _MIN_EXTENT)
-    eb = np.maximum(np.asarray(b, dtype=np.float64), _MIN_EXTENT)
+    ea = np.maximum(np.asarray(a, dtype=np.float64), MIN_EXTENT)
+    eb = np.maximum(np.asarray(b, dtype=np.float64), MIN_EXTENT)
     return float(np.max(np.abs(np.log(ea / eb))))
 
 

@@ -16,8 +16,9 @@ import numpy as np
 
 from smccli.perception.params import PerceptionParams
 
-_BC_MIN = 1e-6
-_D_MAX = float(-np.log(_BC_MIN))
+BC_MIN = 1e-6
+"""Bhattacharyya coefficients are floored here: a histogram distance is at most -ln(BC_MIN)."""
+_D_MAX = float(-np.log(BC_MIN))
 
 
 def histogram_size(params: PerceptionParams) -> int:
@@ -93,4 +94,4 @@ def d_histogram(h1: np.ndarray, h2: np.ndarray) -> float:
     # BC of identical histograms is 1 up to rounding: call that exactly 0.
     if bc > 1.0 - 1e-12:
         return 0.0
-    return float(-np.log(max(bc, _BC_MIN)))
+    return float(-np.log(max(bc, BC_MIN)))
