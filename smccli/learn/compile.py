@@ -50,7 +50,7 @@ from smccli.world.lidar import RANGE_MAX as LIDAR_RANGE_MAX
 from smccli.world.lidar import lidar_mount
 from smccli.world.robot import Robot
 from smccli.world.scene import Scene, robot_identity, scene_of_log, sensor_identity
-from smccli.world.sensors import CameraFrame, hand_in_world
+from smccli.world.sensors import CameraFrame, PoiCommand, hand_in_world
 
 #: Topics every arm log must hold for compile.
 REQUIRED_TOPICS = {
@@ -258,7 +258,8 @@ def _lidar_site(log: Log, scene: Scene) -> str:
     return lidar.target
 
 
-def _commands(log: Log, frag: Fragment) -> list:
+def _commands(log: Log, frag: Fragment) -> list[PoiCommand]:
+    """The operator's commands within ``frag``; LogError when fewer than 3 (no DMP fits)."""
     cmds = [c for c in log.commands if frag.t0 - 1e-6 <= c.t <= frag.t1 + 1e-6]
     if len(cmds) < 3:
         raise LogError(
@@ -450,12 +451,7 @@ def _action(
     """Action saliency (3.4): the commanded POI path over the fragment as a DMP, its goal
     and approach in the salient object's frame; ``held_symmetry`` is that of the object in
     the hand (see :class:`smccli.learn.smc.Action`)."""
-    cmds = [c for c in log.commands if frag.t0 - 1e-6 <= c.t <= frag.t1 + 1e-6]
-    if len(cmds) < 3:
-        raise LogError(
-            f"{log.path.name}: fragment {frag.t0:.2f}-{frag.t1:.2f} s holds fewer "
-            "than 3 operator commands"
-        )
+    cmds = _commands(log, frag)
     t = np.array([c.t for c in cmds]) - cmds[0].t
     path = np.array([c.target for c in cmds], dtype=float)
     grip = np.array([c.gripper for c in cmds])
