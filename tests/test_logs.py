@@ -492,7 +492,7 @@ def test_a_reader_of_some_topics_leaves_the_other_chunks_compressed(tmp_path, mo
     is never decompressed, yet counted (its message indexes say how many it holds); what is
     read is what reading every chunk gives."""
     import smccli.logs.records as records
-    from smccli.learn.compile import READ_TOPICS
+    from smccli.logs.topics import READ_TOPICS
 
     log = _one_message_per_chunk(
         REPO / "sample_logs" / "bench_pick" / "demo.mcap", tmp_path / "split.mcap"

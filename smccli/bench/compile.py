@@ -122,10 +122,11 @@ OTHER_ACTIONS: dict[str, tuple[int, str]] = {
 
 
 def _chains(logs: list[Path]) -> list:
-    from smccli.learn.compile import READ_TOPICS, extract_chain
+    from smccli.learn.compile import extract_chain
     from smccli.learn.params import SmcParams
     from smccli.learn.segmentation import SegmentMode
     from smccli.logs import read_log
+    from smccli.logs.topics import READ_TOPICS
 
     return [
         extract_chain(read_log(p, topics=READ_TOPICS), SmcParams(), SegmentMode.markers)

@@ -39,6 +39,7 @@ from smccli.learn.smc import (
 )
 from smccli.learn.tree import FORMAT, ROOT, Tree, digest, insert_chain, load_tree, save_tree
 from smccli.logs import Log, read_log
+from smccli.logs import topics as tp
 from smccli.logs.robot import geometry_at, robot_model_of
 from smccli.logs.ros2_bag import TopicMap, read_ros2_bag
 from smccli.outputs import ExclusiveLock, check_output
@@ -51,26 +52,6 @@ from smccli.world.lidar import lidar_mount
 from smccli.world.robot import Robot
 from smccli.world.scene import Scene, robot_identity, scene_of_log, sensor_identity
 from smccli.world.sensors import CameraFrame, PoiCommand, hand_in_world
-
-#: Topics every arm log must hold for compile.
-REQUIRED_TOPICS = {
-    "/teleop/command",
-    "/robot/poi",
-    "/robot/joint_states",
-    "/camera/color",
-    "/camera/depth",
-    "/camera/calibration",
-}
-#: Topics every mobile-base log must hold for compile.
-BASE_TOPICS = {
-    "/teleop/command",
-    "/robot/poi",
-    "/robot/joint_states",
-    "/camera/color",
-    "/lidar/scan",
-}
-#: Topics compile reads; the ground truth is deliberately not among them.
-READ_TOPICS = REQUIRED_TOPICS | BASE_TOPICS | {"/tf", "/scale/weight", "/saliency", "/robot/base"}
 
 
 @dataclass(frozen=True, slots=True)
@@ -468,9 +449,9 @@ def required_topics(log: Log, scene: Scene | None = None) -> set[str]:
             scene = None
     if scene is not None and scene.robot.base is not None:
         if scene.robot.arm_joints:  # a mobile manipulator: both, and its base pose
-            return set(BASE_TOPICS) | REQUIRED_TOPICS | {"/robot/base"}
-        return set(BASE_TOPICS)
-    needed = set(REQUIRED_TOPICS)
+            return set(tp.BASE_TOPICS | tp.ARM_TOPICS | {tp.BASE})
+        return set(tp.BASE_TOPICS)
+    needed = set(tp.ARM_TOPICS)
     if log.metadata.get("has_scale") == "true":
         needed.add("/scale/weight")
     return needed
@@ -560,7 +541,7 @@ def _read(job: _Job) -> _Read:
     path = job.path
     try:
         log = (
-            read_log(path, topics=READ_TOPICS, on_warning=warnings.append, lazy_frames=True)
+            read_log(path, topics=tp.READ_TOPICS, on_warning=warnings.append, lazy_frames=True)
             if job.topic_map is None
             else read_ros2_bag(path, job.topic_map, on_warning=warnings.append)
         )

@@ -413,8 +413,6 @@ def _schema_problem(raw: RawLog, ch: Channel) -> str | None:
 
 
 def _check_schemas(c: _Context) -> Check:
-    from smccli.learn.compile import READ_TOPICS
-
     assert c.raw is not None
     raw = c.raw
     counts = _counts(raw)
@@ -428,7 +426,7 @@ def _check_schemas(c: _Context) -> Check:
         problem = _schema_problem(raw, ch)
         if problem:
             # Compile decodes the topics it reads and fails on the first wrong one.
-            rejects = ch.topic in READ_TOPICS and counts.get(ch.id, 0) > 0
+            rejects = ch.topic in tp.READ_TOPICS and counts.get(ch.id, 0) > 0
             (bad_error if rejects else bad_warn).append(problem)
     note = f"; unknown topics, not read: {', '.join(unknown)}" if unknown else ""
     if bad_error or bad_warn:
@@ -517,8 +515,6 @@ def _finite(topic: str, t: float, data: bytes) -> bool:
 
 
 def _check_numbers(c: _Context) -> Check:
-    from smccli.learn.compile import READ_TOPICS
-
     assert c.raw is not None
     raw = c.raw
     bad: dict[str, tuple[int, float]] = {}  # topic -> (count, first time [s])
@@ -552,7 +548,7 @@ def _check_numbers(c: _Context) -> Check:
     parts += [f"{n} {topic} messages do not decode" for topic, n in undecodable.items()]
     if not parts:
         return Check("numbers", "ok", f"no NaN or inf in {checked} messages")
-    status: Status = "error" if any(t in READ_TOPICS for t in [*bad, *undecodable]) else "warn"
+    status: Status = "error" if any(t in tp.READ_TOPICS for t in [*bad, *undecodable]) else "warn"
     return Check("numbers", status, "; ".join(parts))
 
 
@@ -606,8 +602,6 @@ def _guarded(name: str, fn: Callable[[_Context], Check], c: _Context) -> Check:
 def diagnose(path: str | os.PathLike[str], topic_map: TopicMap | None = None) -> Diagnosis:
     """Check one log; never raises for a bad or missing file (its rows say why). With
     ``topic_map`` the log is a ROS 2 bag, checked through the map."""
-    from smccli.learn.compile import READ_TOPICS
-
     path = Path(path)
     try:
         if topic_map is not None:
@@ -629,7 +623,7 @@ def diagnose(path: str | os.PathLike[str], topic_map: TopicMap | None = None) ->
         c.read_error = f"reader failed: {type(e).__name__}: {e}"
     if c.raw is not None:
         try:
-            c.log = read_log(path, topics=READ_TOPICS, on_warning=c.warnings.append)
+            c.log = read_log(path, topics=tp.READ_TOPICS, on_warning=c.warnings.append)
         except SmcError as e:
             c.read_error = _one_line(path, str(e))
         except Exception as e:  # the reader failing in an unplanned way is a finding too

@@ -45,6 +45,13 @@ SALIENCY = "/saliency"
 GROUND_TRUTH = "/sim/ground_truth"
 DECISION = "/smc/decision"
 
+ARM_TOPICS = frozenset({COMMAND, POI, JOINT_STATES, COLOR, DEPTH, CALIBRATION})
+"""Topics every arm log must hold for compile."""
+BASE_TOPICS = frozenset({COMMAND, POI, JOINT_STATES, COLOR, SCAN})
+"""Topics every mobile-base log must hold for compile."""
+READ_TOPICS = ARM_TOPICS | BASE_TOPICS | {TF, WEIGHT, SALIENCY, BASE}
+"""Topics compile reads; the ground truth is deliberately not among them."""
+
 PROTO_TOPICS: dict[str, type[ProtoMessage]] = {
     JOINT_STATES: JointStates,
     POI: PoseInFrame,
