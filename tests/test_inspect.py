@@ -27,9 +27,11 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from rerun.chunk import RrdReader  # noqa: E402
 
 from smccli.errors import LogError, SmcError, TreeError  # noqa: E402
-from smccli.inspect.recording import branch_colours, colour_name, dominant_rgb, inspect  # noqa: E402
+from smccli.inspect.labels import branch_colours  # noqa: E402
+from smccli.inspect.recording import inspect  # noqa: E402
 from smccli.learn.tree import load_tree  # noqa: E402
 from smccli.logs import read_log  # noqa: E402
+from smccli.perception.colours import colour_name, dominant_rgb  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 SAMPLES = Path(os.environ.get("SMC_SAMPLE_LOGS", REPO / "sample_logs"))
@@ -110,8 +112,9 @@ def _simulated_demo(path: Path, *, decisions: bool) -> None:
 def _hand_made_tree(log_path: Path, out: Path) -> None:
     """Two SMCs fitted on the demo's command path (approach, grasp), the cube as cluster."""
     from smccli.learn import dmp
+    from smccli.learn.frames import goal_in_object
     from smccli.learn.params import SmcParams
-    from smccli.learn.smc import Action, SalientPerceptions, Smc, Source, goal_in_object
+    from smccli.learn.smc import Action, SalientPerceptions, Smc, Source
     from smccli.learn.tree import Tree, insert_chain, save_tree
     from smccli.perception import Cluster
     from smccli.perception.histogram import histogram_size

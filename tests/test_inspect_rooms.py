@@ -20,10 +20,10 @@ from scipy.spatial import cKDTree  # noqa: E402
 from test_inspect import read_rrd  # noqa: E402
 
 from smccli.inspect.recording import inspect  # noqa: E402
+from smccli.learn.frames import goal_at_scan_pose  # noqa: E402
 from smccli.learn.tree import Tree, load_tree  # noqa: E402
 from smccli.logs import Log, read_log  # noqa: E402
 from smccli.perception.histogram import histogram_size  # noqa: E402
-from smccli.perception.scan import pose_compose  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 ROOMS = REPO / "sample_logs" / "rooms"
@@ -239,7 +239,7 @@ def test_tree_scans_goals_and_labels(inspected, rid):
         goal = rec[f"/world/actions/{e.id}/goal_pose"]
         assert goal["archetypes"] == {"Arrows3D"}
         origin = np.asarray(_instances(goal, "Arrows3D:origins")[0])
-        want = pose_compose(np.asarray(p.scan_pose), np.asarray(a.goal)[[0, 1, 3]])
+        want = goal_at_scan_pose(np.asarray(a.goal)[[0, 1, 3]], np.asarray(p.scan_pose))
         assert np.allclose(origin[:2], want[:2], atol=1e-5)
         # The goal in the world is where the demonstrated path went.
         assert np.linalg.norm(want[:2] - a.dmp.goal[:2]) < 0.1

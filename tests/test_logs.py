@@ -21,6 +21,7 @@ import smccli
 from smccli.errors import LogError, OutputExistsError
 from smccli.logs import LogWriter, log_summary, part_path, read_log, strip_topic
 from smccli.logs import topics as tp
+from smccli.world import geometry
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
 REPO = Path(smccli.__file__).resolve().parent.parent
@@ -292,10 +293,10 @@ def test_rotation_round_trip() -> None:
     qs = rng.normal(size=(200, 4))
     qs = np.vstack([qs, [[0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1], [1e-9, 1, 1, 0]]])  # 180 deg
     for q in qs:
-        R = tp.quat_to_matrix(q)
-        np.testing.assert_allclose(tp.quat_to_matrix(tp.matrix_to_quat(R)), R, atol=1e-9)
+        R = geometry.quat_matrix(q)
+        np.testing.assert_allclose(geometry.quat_matrix(geometry.matrix_quat(R)), R, atol=1e-9)
     for yaw in np.linspace(-3.1, 3.1, 13):
-        assert tp.quat_to_yaw(tp.yaw_to_quat(yaw)) == pytest.approx(yaw, abs=1e-12)
+        assert geometry.quat_yaw(geometry.yaw_quat(yaw)) == pytest.approx(yaw, abs=1e-12)
 
 
 CHILD = textwrap.dedent(

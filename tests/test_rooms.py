@@ -16,9 +16,9 @@ from smccli.execute.episode import episode, layout_for, resolve
 from smccli.execute.evaluation import score
 from smccli.learn.compile import compile_logs
 from smccli.learn.contingency import d_a, d_p, scan_transform
+from smccli.learn.frames import goal_at_scan_pose
 from smccli.learn.tree import ROOT, load_tree
 from smccli.logs import read_log
-from smccli.perception.scan import pose_compose
 from smccli.record.operators import load_script, parse_script, run_script, script_layout
 from smccli.world.layout import nominal_layout, sample_layout
 from smccli.world.scene import ROBOT_KEY, SCENES_DIR, load_scene, load_scene_from_text
@@ -100,7 +100,9 @@ def test_demos_merge_then_branch_by_the_arrow(tree_path: Path) -> None:
     assert d_p(a.perception, b.perception, tree.params, T) > tree.params.t_hp
     assert d_a(a.action, b.action, tree.params, T) > 1.0
     goals = {
-        e.sources[0].log: pose_compose(e.smc.perception.scan_pose, e.smc.action.goal[[0, 1, 3]])
+        e.sources[0].log: goal_at_scan_pose(
+            e.smc.action.goal[[0, 1, 3]], e.smc.perception.scan_pose
+        )
         for e in branches
     }
     scene = load_scene("rooms")

@@ -16,12 +16,12 @@ from scipy.spatial.transform import Rotation
 
 from smccli.errors import LogError, SceneError
 from smccli.learn.compile import compile_logs
+from smccli.learn.frames import goal_at_scan_pose
 from smccli.learn.tree import ROOT, Tree, load_tree
 from smccli.logs import read_log
 from smccli.logs.ros2_bag import TopicMap, load_topic_map, parse_topic_map, read_ros2_bag
 from smccli.logs.ros2_export import export_ros2
 from smccli.logs.ros2_msgs import export_map, msgdef
-from smccli.perception.scan import pose_compose
 
 SCENES = ["bench_pick", "bench_pick_panda", "pick_place", "weigh_sort", "rooms"]
 
@@ -55,7 +55,7 @@ def _chain(tree: Tree) -> list[tuple[str, str, int]]:
 def _world_goal(edge) -> np.ndarray:
     a, p = edge.smc.action, edge.smc.perception
     if a.goal_frame == "scan":
-        x, y, yaw = pose_compose(p.scan_pose, a.goal[[0, 1, 3]])
+        x, y, yaw = goal_at_scan_pose(a.goal[[0, 1, 3]], p.scan_pose)
         return np.array([x, y, 0.0, yaw])
     return np.asarray(a.goal)
 

@@ -13,22 +13,18 @@ import json
 import numpy as np
 import pytest
 
+from smccli.learn.frames import goal_from_scan, goal_in_scan
 from smccli.perception.params import PerceptionParams
 from smccli.perception.room import d_room, room_histogram
 from smccli.perception.scan import (
     Scan2D,
     ScanAlignment,
     align_scans,
-    goal_in_lidar,
-    map_goal,
-    pose_compose,
-    pose_inverse,
-    pose_to_se2,
     scan_distance,
     scan_from_dict,
     scan_to_dict,
-    se2_to_pose,
 )
+from smccli.world.geometry import compose, inverse, se2, se2_pose
 
 N_BEAMS = 360
 RANGE_MAX = 10.0
@@ -48,7 +44,7 @@ def polygon(corners: list[tuple[float, float]]) -> np.ndarray:
 def box(cx: float, cy: float, length: float, width: float, yaw: float = 0.0) -> np.ndarray:
     """A rectangular piece of furniture, its edges (4, 2, 2) [m]."""
     half = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * [length / 2, width / 2]
-    return polygon(list(half @ pose_to_se2((0, 0, yaw))[:2, :2].T + [cx, cy]))
+    return polygon(list(half @ se2((0, 0, yaw))[:2, :2].T + [cx, cy]))
 
 
 ROOMS = {
@@ -111,7 +107,7 @@ def cast(
 
 def pose_error(T: np.ndarray, T_true: np.ndarray) -> tuple[float, float]:
     """Translation [m] and rotation [deg] of T_true^-1 T."""
-    e = se2_to_pose(np.linalg.inv(T_true) @ T)
+    e = se2_pose(np.linalg.inv(T_true) @ T)
     return float(np.hypot(e[0], e[1])), float(np.degrees(abs(e[2])))
 
 
@@ -129,12 +125,12 @@ def test_se2_helpers_round_trip(rng):
     for _ in range(20):
         a = np.r_[rng.uniform(-3, 3, 2), rng.uniform(-np.pi, np.pi)]
         b = np.r_[rng.uniform(-3, 3, 2), rng.uniform(-np.pi, np.pi)]
-        np.testing.assert_allclose(se2_to_pose(pose_to_se2(a)), a, atol=1e-12)
-        np.testing.assert_allclose(pose_compose(a, pose_inverse(a)), 0.0, atol=1e-12)
-        ab = pose_to_se2(a) @ pose_to_se2(b)
-        np.testing.assert_allclose(pose_to_se2(pose_compose(a, b)), ab, atol=1e-12)
+        np.testing.assert_allclose(se2_pose(se2(a)), a, atol=1e-12)
+        np.testing.assert_allclose(compose(a, inverse(a)), 0.0, atol=1e-12)
+        ab = se2(a) @ se2(b)
+        np.testing.assert_allclose(se2(compose(a, b)), ab, atol=1e-12)
     # pi stays pi (the wrap is into (-pi, pi]).
-    assert se2_to_pose(pose_to_se2((0, 0, -np.pi)))[2] == pytest.approx(np.pi)
+    assert se2_pose(se2((0, 0, -np.pi)))[2] == pytest.approx(np.pi)
 
 
 def test_points_drop_beams_without_return():
@@ -188,7 +184,7 @@ def test_align_recovers_known_offset(rng, room, offset):
     dx, dy, dyaw = offset
     source_pose = target_pose + [dx, dy, np.radians(dyaw)]
     al = align_scans(cast(ROOMS[room], target_pose, rng), cast(ROOMS[room], source_pose, rng))
-    T_true = np.linalg.inv(pose_to_se2(target_pose)) @ pose_to_se2(source_pose)
+    T_true = np.linalg.inv(se2(target_pose)) @ se2(source_pose)
     dt, dr = pose_error(al.T_target_source, T_true)
     assert dt < 0.01 and dr < 1.0, (dt, dr)
     assert al.fitness > 0.9 and al.rmse < 0.03
@@ -196,7 +192,7 @@ def test_align_recovers_known_offset(rng, room, offset):
     R = al.T_target_source[:2, :2]
     np.testing.assert_allclose(al.T_target_source[2], [0, 0, 1], atol=1e-12)
     np.testing.assert_allclose(R.T @ R, np.eye(2), atol=1e-12)
-    np.testing.assert_allclose(pose_to_se2(al.pose), al.T_target_source, atol=1e-12)
+    np.testing.assert_allclose(se2(al.pose), al.T_target_source, atol=1e-12)
 
 
 def test_the_same_scans_align_to_the_same_bits(rng):
@@ -268,30 +264,28 @@ def test_map_goal_reaches_the_demonstrated_place(rng, distance, turn, heading):
     goal_room = np.array([4.0, 2.2, -1.2])
     drift_demo = np.array([0.3, -0.2, 0.1])  # odometry's world frame in the room, at the demo
     drift_now = np.array([-0.5, 0.4, -0.6])  # ... and today
-    lidar_demo_room = pose_compose(base_demo_room, LIDAR_ON_BASE)
+    lidar_demo_room = compose(base_demo_room, LIDAR_ON_BASE)
     scan_demo = cast(room, lidar_demo_room, rng)
-    goal_rel = goal_in_lidar(
-        pose_compose(drift_demo, goal_room), pose_compose(drift_demo, lidar_demo_room)
-    )
+    goal_rel = goal_in_scan(compose(drift_demo, goal_room), compose(drift_demo, lidar_demo_room))
 
     base_now_room = base_demo_room + [
         distance * np.cos(heading),
         distance * np.sin(heading),
         np.radians(turn),
     ]
-    lidar_now_room = pose_compose(base_now_room, LIDAR_ON_BASE)
+    lidar_now_room = compose(base_now_room, LIDAR_ON_BASE)
     al = align_scans(scan_demo, cast(room, lidar_now_room, rng))
-    goal_now = map_goal(goal_rel, al, pose_compose(drift_now, lidar_now_room))
+    goal_now = goal_from_scan(goal_rel, al, compose(drift_now, lidar_now_room))
 
-    dt, dr = pose_error(pose_to_se2(goal_now), pose_to_se2(pose_compose(drift_now, goal_room)))
+    dt, dr = pose_error(se2(goal_now), se2(compose(drift_now, goal_room)))
     assert dt < 0.01 and dr < 1.0, (dt, dr)
 
 
 def test_map_goal_takes_a_matrix_or_an_alignment():
-    T = pose_to_se2((0.3, -0.1, 0.5))
+    T = se2((0.3, -0.1, 0.5))
     al = ScanAlignment(T_target_source=T, fitness=1.0, rmse=0.0)
     g, lidar = np.array([1.0, 2.0, 0.3]), np.array([0.5, 0.5, -1.0])
-    np.testing.assert_allclose(map_goal(g, T, lidar), map_goal(g, al, lidar))
+    np.testing.assert_allclose(goal_from_scan(g, T, lidar), goal_from_scan(g, al, lidar))
 
 
 # --- room histogram (SI) ---------------------------------------------------------------

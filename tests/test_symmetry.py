@@ -14,6 +14,7 @@ from test_tree import _path, _smc
 from smccli.execute.episode import episode, layout_for, resolve
 from smccli.learn.compile import compile_logs
 from smccli.learn.contingency import align, d_a, merge
+from smccli.learn.frames import goal_from_object
 from smccli.learn.params import SmcParams
 from smccli.learn.smc import (
     TWO_PI,
@@ -21,7 +22,6 @@ from smccli.learn.smc import (
     Smc,
     action_from_path,
     approach_in_frame,
-    goal_from_object,
 )
 from smccli.learn.tree import ROOT, load_tree
 from smccli.perception import Cluster

@@ -14,14 +14,13 @@ from hypothesis import strategies as st
 
 from smccli.errors import TreeError
 from smccli.learn.contingency import c_f, d_a, d_p, match_context, merge
+from smccli.learn.frames import goal_from_object, goal_in_object
 from smccli.learn.params import SmcParams, with_overrides
 from smccli.learn.smc import (
     SalientPerceptions,
     Smc,
     Source,
     action_from_path,
-    goal_from_object,
-    goal_in_object,
 )
 from smccli.learn.tree import ROOT, Tree, digest, insert_chain, load_tree, save_tree, tree_to_dict
 from smccli.perception import Cluster

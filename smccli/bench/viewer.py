@@ -209,7 +209,7 @@ def page_drawn(tree: Any, frame: np.ndarray | None = None) -> Callable[[np.ndarr
     """Whether a screenshot shows ``tree``: every swatch colour in the graph view, a branch
     colour in the 3D view; with ``frame`` (an RGB camera frame), the camera view shows a
     picture within 20 (mean, of 255) of it."""
-    from smccli.inspect.recording import branch_colours, swatch_rgb
+    from smccli.inspect.labels import branch_colours, swatch_rgb
 
     colours = branch_colours(tree)
     swatches = {swatch_rgb(e, tree, colours[e.id]) for e in tree.edges}
@@ -232,7 +232,7 @@ def main() -> None:
     """Screenshots of the sample trees in the web viewer -> docs/img/viewer_<scene>.png."""
     from PIL import Image
 
-    from smccli.inspect.recording import free_port
+    from smccli.inspect.serve import free_port
     from smccli.learn.compile import compile_logs
     from smccli.learn.tree import load_tree
     from smccli.logs import read_log

@@ -43,6 +43,7 @@ from smccli.execute.evaluation import OUTCOMES  # noqa: E402
 from smccli.execute.executor import check_speed  # noqa: E402
 from smccli.learn.tree import Tree, digest  # noqa: E402
 from smccli.outputs import check_output, write_atomic  # noqa: E402
+from smccli.world.geometry import wrap  # noqa: E402
 from smccli.world.scene import ROBOT_KEY, Scene  # noqa: E402
 from smccli.world.sim import OdometryDrift, Sim  # noqa: E402
 
@@ -173,11 +174,11 @@ def run_trial(
         obj = ROBOT_KEY
         x, y, _, a = layout[ROBOT_KEY]
         dist = math.dist((x, y), scene.start.pose[:2])
-        yaw = abs(math.remainder(a - scene.start.pose[2], 2 * math.pi))
+        yaw = abs(wrap(a - scene.start.pose[2]))
     elif obj is not None:
         spec = scene.object(obj)
         dist = math.dist(layout[obj][:2], spec.pose[:2])
-        yaw = abs(math.remainder(layout[obj][3] - spec.pose[3], 2 * math.pi))
+        yaw = abs(wrap(layout[obj][3] - spec.pose[3]))
     return TrialResult(
         index=index,
         outcome=r.outcome,

@@ -55,8 +55,9 @@ from smccli.execute.sensing import Sensors
 from smccli.learn.dmp import Dmp, rollout
 from smccli.learn.tree import ROOT, Edge, Tree
 from smccli.perception import Cluster, scale_reading
-from smccli.perception.scan import align_scans, pose_to_se2, se2_to_pose
-from smccli.world.sensors import CameraFrame, PoiCommand, hand_in_base, hand_in_world
+from smccli.perception.scan import align_scans
+from smccli.world.geometry import between, compose, se2, se2_pose
+from smccli.world.sensors import CameraFrame, PoiCommand
 
 __all__ = [
     "ARRIVAL_TOLERANCE",
@@ -260,7 +261,7 @@ class TreeExecutor:
             acquire_s = time.perf_counter() - t0
             obs = Observation(
                 t=t,
-                poi=hand_in_world(base, s.poi()),
+                poi=compose(base, s.poi()),
                 camera=frame,
                 robot_geometry=geometry,
                 scan=scan,
@@ -320,7 +321,7 @@ class TreeExecutor:
             row = self._base_path[-1 if i is None else min(i, len(self._base_path) - 1)]
             base = row[[0, 1, 3]]
         assert base is not None
-        return PoiCommand(s.t, hand_in_base(base, pose), grip, base=base)
+        return PoiCommand(s.t, between(base, pose), grip, base=base)
 
     def _poi_now(self) -> np.ndarray:
         """The POI the plan drives, now: a mobile manipulator's hand in odometry's frame, or
@@ -331,7 +332,7 @@ class TreeExecutor:
         b = s.base()
         if self._plan_poi == "base":
             return np.array([b[0], b[1], 0.0, b[2]])
-        return hand_in_world(b, s.poi())
+        return compose(b, s.poi())
 
     def _send(self, cmd: PoiCommand) -> None:
         self._last_cmd = cmd
@@ -395,7 +396,7 @@ class TreeExecutor:
         stored = edge.smc.perception.scan
         assert stored is not None
         # D: the demo lidar's frame in today's odometry frame (D = L * T^-1).
-        D = pose_to_se2(s.lidar_pose()) @ np.linalg.inv(T0)
+        D = se2(s.lidar_pose()) @ np.linalg.inv(T0)
         path = path.copy()
         next_fix = s.t + RELOCALIZE_PERIOD
         i = 1
@@ -405,7 +406,7 @@ class TreeExecutor:
             if s.t < next_fix - 1e-9:
                 continue
             next_fix = s.t + RELOCALIZE_PERIOD
-            scan, L = s.lidar(), pose_to_se2(s.lidar_pose())
+            scan, L = s.lidar(), se2(s.lidar_pose())
             try:
                 al = align_scans(
                     stored, scan, self.params.scan, initial=np.linalg.inv(D) @ L, search=False
@@ -415,12 +416,13 @@ class TreeExecutor:
             if al.fitness < RELOCALIZE_MIN_FITNESS:
                 continue  # out of sight of the stored place: odometry alone from here
             D_new = L @ np.linalg.inv(al.T_target_source)
-            cx, cy, cyaw = se2_to_pose(D_new @ np.linalg.inv(D))
+            cx, cy, cyaw = se2_pose(D_new @ np.linalg.inv(D))
             if math.hypot(cx, cy) > RELOCALIZE_MAX_STEP[0] or abs(cyaw) > RELOCALIZE_MAX_STEP[1]:
                 continue
             C = D_new @ np.linalg.inv(D)
-            path[i:] = _move_poses(path[i:], C)
-            goal = _move_poses(goal[None, :], C)[0]
+            correction = se2_pose(C)  # base poses [x, y, 0, yaw] move with it, yaws unwrapped
+            path[i:] = compose(correction, path[i:])
+            goal = compose(correction, goal)
             D = D_new
         return goal
 
@@ -474,12 +476,3 @@ class TreeExecutor:
             actions.append(self.execute(plan))
             path.append(policy.edge(plan.edge))
             policy.advance(plan)
-
-
-def _move_poses(poses: np.ndarray, C: np.ndarray) -> np.ndarray:
-    """Base poses (n, 4) ``[x, y, z, yaw]`` moved by the SE(2) transform ``C`` (3, 3); yaws
-    stay unwrapped."""
-    out = poses.copy()
-    out[:, :2] = poses[:, :2] @ C[:2, :2].T + C[:2, 2]
-    out[:, 3] = poses[:, 3] + math.atan2(C[1, 0], C[0, 0])
-    return out

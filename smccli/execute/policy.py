@@ -30,20 +30,22 @@ import mujoco
 import numpy as np
 
 from smccli.errors import SmcError, TreeError
+from smccli.learn import frames
 from smccli.learn.contingency import d_p as d_p_stored
 from smccli.learn.contingency import goal_gap
 from smccli.learn.dmp import rollout
 from smccli.learn.params import SmcParams
-from smccli.learn.smc import TWO_PI, Action, goal_from_object, pose_from_pose
+from smccli.learn.smc import Action
 from smccli.learn.tree import ROOT, Edge, Tree
 from smccli.perception import Cluster, clusters_from_frame
 from smccli.perception.distance import MIN_EXTENT
 from smccli.perception.histogram import BC_MIN
 from smccli.perception.room import d_room, room_histogram
-from smccli.perception.scan import Scan2D, align_scans, chamfer, map_goal
-from smccli.world.controller import reachable, wrap
+from smccli.perception.scan import Scan2D, align_scans, chamfer
+from smccli.world.controller import reachable
+from smccli.world.geometry import between
 from smccli.world.robot import Robot
-from smccli.world.sensors import CameraFrame, RobotGeometry, hand_in_base, hand_in_world
+from smccli.world.sensors import CameraFrame, RobotGeometry
 
 CONTROL_PERIOD = 0.01
 """Default control period of a plan's trajectory [s] (the simulator's)."""
@@ -288,7 +290,7 @@ class Observation:
     base: np.ndarray | None = None
     """A mobile manipulator's base pose ``[x, y, yaw]`` from odometry [m, m, rad]; its
     ``poi`` is then the hand in odometry's frame (this pose composed with the hand in the
-    base's frame, :func:`smccli.world.sensors.hand_in_world`)."""
+    base's frame, :func:`smccli.world.geometry.compose`)."""
 
     def __post_init__(self) -> None:
         self._vector("poi", "[x, y, z, yaw]")
@@ -521,12 +523,12 @@ class TreePolicy:
         dec = replace(dec, mapped_goal=goal, duration=duration)
         base_goal = None
         if a.base_dmp is not None and a.base_goal is not None and base_now is not None:
-            base_goal = self._map_base_goal(a, cluster, base_now, obs.poi)
+            base_goal = frames.map_base_goal(a, cluster, base_now, obs.poi)
         # A mobile manipulator's hand goal is reached from where its base will stand.
         hand_goal = goal
         if base_now is not None and a.poi == "hand":
             stand = base_now if base_goal is None else base_goal
-            hand_goal = hand_in_base(stand[[0, 1, 3]], goal)
+            hand_goal = between(stand[[0, 1, 3]], goal)
         if (
             self.model is not None
             and a.poi != "base"
@@ -698,34 +700,6 @@ class TreePolicy:
                 f"match on {what} (Observation.{name})"
             )
 
-    @staticmethod
-    def _hand_frame(a: Action, hand: np.ndarray, base: np.ndarray | None) -> np.ndarray:
-        """The frame of a goal relative to the hand ``[x, y, z, yaw]``: the hand's pose, its
-        yaw (ambiguous by the gripper's pi) taken nearest the base's plus ``a.hand_yaw``."""
-        frame = np.array(hand, dtype=float)
-        if a.hand_yaw is not None and base is not None:
-            ref = float(base[2]) + a.hand_yaw
-            frame[3] = ref + math.remainder(float(hand[3]) - ref, math.pi)
-        return frame
-
-    def _map_base_goal(
-        self, a: Action, cluster: Cluster | None, base_now: np.ndarray, hand_now: np.ndarray
-    ) -> np.ndarray:
-        """Where a mobile manipulator's base goes while its hand acts (``a.base_goal``): in
-        the salient object's frame, the object's yaw taken nearest the base's heading (a
-        base does not turn round with an elongated handle's symmetry); else as taught."""
-        assert a.base_goal is not None
-        if a.goal_frame == "hand":
-            g = pose_from_pose(self._hand_frame(a, hand_now, base_now[[0, 1, 3]]), a.base_goal)
-            g[2] = 0.0
-        elif a.goal_frame == "object" and cluster is not None:
-            g = goal_from_object(a.base_goal, cluster, near_yaw=float(base_now[3]), flip=False)
-            g[2] = 0.0
-        else:
-            g = np.array(a.base_goal, dtype=float)
-        g[3] = base_now[3] + wrap(float(g[3] - base_now[3]))
-        return g
-
     def map_goal(
         self,
         action: Action,
@@ -736,53 +710,16 @@ class TreePolicy:
         base: np.ndarray | None = None,
         taught: Cluster | None = None,
     ) -> np.ndarray:
-        """Contingent action mapping of the goal (eq. 38-39, 46): ``start`` the POI now,
-        ``cluster`` the context cluster the SMC matched (``taught``: the demonstrated one);
-        a scan-frame goal needs the ``edge`` whose scan was aligned at the last decision and
-        the ``lidar_pose`` now; a goal in a mobile manipulator's base frame needs the
-        ``base`` pose [x, y, yaw]."""
-        if action.goal_frame == "scan":
-            # G_now = L_now * T^-1 * G_rel, T = the current lidar in the demo lidar's frame,
-            # from the alignment that matched the scan (_match_base).
-            if edge is None or edge not in self._scan_alignment or lidar_pose is None:
-                raise SmcError(
-                    f"edge {edge}: a goal in the taught scan's frame needs that scan aligned at "
-                    "this decision and the lidar's pose"
-                )
-            T = self._scan_alignment[edge]
-            x, y, yaw = map_goal(action.goal[[0, 1, 3]], T, lidar_pose)
-            return np.array([x, y, 0.0, start[3] + wrap(float(yaw - start[3]))])
-        if action.goal_frame == "hand":  # relative to the hand's pose now (it holds a handle)
-            frame = self._hand_frame(action, start, base)
-            goal = pose_from_pose(frame, action.goal)
-            goal[3] = start[3] + float(action.goal[3])  # the wrist turns as it did
-            return goal
-        if self.robot.gripper is None or action.poi == "base":  # a base's world goal
-            goal = np.array(action.goal, dtype=float)
-            goal[3] = start[3] + wrap(float(goal[3] - start[3]))
-            return goal
-        # A parallel gripper is symmetric under a half turn, so the wrist may take the short
-        # way round, unless the object grasped or held has no symmetry: then the half turn
-        # would put its other side where the demonstration put this one.
-        asymmetric = max(action.held_symmetry, action.symmetry if cluster else 0.0)
-        flip = asymmetric < TWO_PI - 1e-6
-        if action.goal_frame == "object" and cluster is not None:
-            flip = flip and cluster.yaw_period < TWO_PI - 1e-6
-            taught_yaw = None if taught is None else float(taught.yaw)
-            goal = goal_from_object(
-                action.goal, cluster, near_yaw=float(start[3]), flip=flip, taught_yaw=taught_yaw
-            )
-        else:
-            goal = np.array(action.goal, dtype=float)
-            if action.goal_frame == "base":  # a mobile manipulator's hand, relative to it
-                if base is None:
-                    raise SmcError(f"edge {edge}: a goal in the base's frame needs its pose")
-                goal = hand_in_world(base, goal)
-                # A pose of the hand relative to the base is a posture: the wrist ends as
-                # taught, not by the gripper's half turn, which swings the elbow elsewhere
-                # (measured: the tucked arm then hid the shelf from the head camera).
-                flip = False
-            if flip:
-                goal[3] = start[3] + math.remainder(float(goal[3] - start[3]), math.pi)
-        goal[3] = start[3] + wrap(float(goal[3] - start[3]))
-        return goal
+        """:func:`smccli.learn.frames.map_goal` for this robot, a scan-frame goal with the
+        alignment of ``edge``'s scan at the last decision (:meth:`_match_base`)."""
+        return frames.map_goal(
+            action,
+            cluster,
+            start,
+            gripper=self.robot.gripper is not None,
+            alignment=self._scan_alignment.get(edge) if edge is not None else None,
+            lidar_pose=lidar_pose,
+            base=base,
+            taught=taught,
+            edge=edge,
+        )

@@ -21,11 +21,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from smccli.errors import LogError
 from smccli.logs import read_log
 from smccli.logs import topics as tp
+from smccli.world.geometry import quat_yaw, wrap
 from smccli.world.scene import ROBOT_KEY, Layout, scene_of_log
 from smccli.world.sim import Sim
 
@@ -92,8 +92,7 @@ def initial_layout(
     for name, p in poses.items():
         if p[2] <= parked_z + 1e-6:
             continue
-        qw, qx, qy, qz = p[3:7]
-        yaw = float(Rotation.from_quat([qx, qy, qz, qw]).as_euler("zyx")[0])
+        yaw = quat_yaw(p[3:7])
         layout[name] = (float(p[0]), float(p[1]), float(p[2]), yaw)
     if base is not None:
         layout[ROBOT_KEY] = (float(base[0]), float(base[1]), 0.0, float(base[2]))
@@ -136,7 +135,7 @@ def verify_log(path: str | Path) -> Verification:
         for k, cmd in enumerate(log.commands):
             sim.step(cmd)
             want, got = log.poi[k + 1], sim.poi()
-            dyaw = math.remainder(float(got[3] - want[3]), 2 * math.pi)
+            dyaw = wrap(float(got[3] - want[3]))
             poi_err[k] = math.hypot(float(np.linalg.norm(got[:3] - want[:3])), YAW_WEIGHT * dyaw)
             dq = np.abs(sim.joint_state().position - log.joint_states[k + 1].position)
             finger_err[k] = float(dq[fingers].max(initial=0.0))

@@ -13,12 +13,18 @@ from __future__ import annotations
 import re
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
 
 from smccli.errors import SmcError
+from smccli.world.geometry import xyzw
+
+if TYPE_CHECKING:
+    import rerun as rr
+
+    from smccli.logs.log import Log
 
 RATE = 20.0
 """Poses drawn per second of log at most [Hz]."""
@@ -47,11 +53,6 @@ def robot_bodies(model: mujoco.MjModel, joint_names: tuple[str, ...]) -> list[in
 def _entity(model: mujoco.MjModel, body: int) -> str:
     name = model.body(body).name or f"body{body}"
     return "/world/robot/" + re.sub(r"[^A-Za-z0-9_-]", "_", name)
-
-
-def _xyzw(wxyz: np.ndarray) -> list[float]:
-    w, x, y, z = (float(v) for v in wxyz)
-    return [x, y, z, w]
 
 
 def _rgba(model: mujoco.MjModel, g: int) -> np.ndarray:
@@ -96,7 +97,9 @@ def _shape(model: mujoco.MjModel, g: int) -> Any | None:
     return None
 
 
-def log_robot(rec: Any, log: Any, warn: Callable[[str], None] = lambda m: None) -> None:
+def log_robot(
+    rec: rr.RecordingStream, log: Log, warn: Callable[[str], None] = lambda m: None
+) -> None:
     """Draw the robot of ``log`` under ``/world/robot`` on the ``time`` timeline."""
     import rerun as rr
 
@@ -124,7 +127,7 @@ def log_robot(rec: Any, log: Any, warn: Callable[[str], None] = lambda m: None) 
             path = f"{_entity(model, b)}/geom{g}"
             local = rr.Transform3D(
                 translation=model.geom_pos[g],
-                quaternion=rr.Quaternion(xyzw=_xyzw(model.geom_quat[g])),
+                quaternion=rr.Quaternion(xyzw=xyzw(model.geom_quat[g])),
             )
             rec.log(path, local, shape, static=True)
     times = np.array([js.t for js in log.joint_states])
@@ -139,7 +142,7 @@ def log_robot(rec: Any, log: Any, warn: Callable[[str], None] = lambda m: None) 
         data.qpos[adr] = log.joint_states[k].position
         mujoco.mj_kinematics(model, data)
         pos[i] = data.xpos[bodies]
-        quat[i] = data.xquat[bodies][:, [1, 2, 3, 0]]  # wxyz -> xyzw
+        quat[i] = xyzw(data.xquat[bodies])
     index = [rr.TimeColumn(TIMELINE, duration=times[keep])]
     for j, b in enumerate(bodies):
         rec.send_columns(

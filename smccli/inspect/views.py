@@ -13,11 +13,14 @@ cropped clouds stay in 3D).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from smccli.learn.tree import ROOT, Tree
+
+if TYPE_CHECKING:
+    import rerun.blueprint as rrb
 
 CHAR_W = 7.0
 """Width of one label character in graph-view units (Rerun's label font at zoom 1,
@@ -155,7 +158,7 @@ TIMELINE = "time"
 
 def blueprint(
     *, mobile: bool = False, graph: GraphLayout | None = None, framing: Framing | None = None
-) -> Any:
+) -> rrb.Blueprint:
     """Graph and time series on the left, 3D world, camera, depth and events on the right;
     ``mobile``: a tab with the room histograms next to the events. ``graph`` and
     ``framing`` set where the graph and the 3D views open."""

@@ -25,6 +25,7 @@ import numpy as np
 from smccli import __version__
 from smccli.errors import LogError, SmcError, TreeError
 from smccli.learn import dmp as dmp_mod
+from smccli.learn.frames import goal_in_hand, goal_in_object
 from smccli.learn.params import SmcParams, params_to_dict, with_overrides
 from smccli.learn.segmentation import Fragment, SegmentMode, segment, trace_from_commands
 from smccli.learn.smc import (
@@ -34,8 +35,6 @@ from smccli.learn.smc import (
     Source,
     action_from_path,
     action_in_scan_frame,
-    goal_in_object,
-    pose_in_pose,
 )
 from smccli.learn.tree import FORMAT, ROOT, Tree, digest, insert_chain, load_tree, save_tree
 from smccli.logs import Log, read_log
@@ -46,12 +45,13 @@ from smccli.outputs import ExclusiveLock, check_output
 from smccli.perception import Cluster, clusters_from_frame, salient_cluster, scale_reading
 from smccli.perception.params import scene_perception
 from smccli.perception.room import room_histogram
-from smccli.perception.scan import Scan2D, pose_compose
+from smccli.perception.scan import Scan2D
+from smccli.world.geometry import compose, wrap_yaw
 from smccli.world.lidar import RANGE_MAX as LIDAR_RANGE_MAX
 from smccli.world.lidar import lidar_mount
 from smccli.world.robot import Robot
 from smccli.world.scene import Scene, robot_identity, scene_of_log, sensor_identity
-from smccli.world.sensors import CameraFrame, PoiCommand, hand_in_world
+from smccli.world.sensors import CameraFrame, PoiCommand
 
 
 @dataclass(frozen=True, slots=True)
@@ -279,7 +279,7 @@ def _navigation_smc(
         raise LogError(f"{name}: no lidar scan within 0.2 s after t={frag.t0:.2f} s")
     msg = log.scans[i]
     scan = Scan2D.from_span(msg.ranges, msg.start_angle, msg.end_angle, LIDAR_RANGE_MAX)
-    lidar_pose = pose_compose(base[int(np.argmin(np.abs(base_t - msg.t)))], mount)
+    lidar_pose = wrap_yaw(compose(base[int(np.argmin(np.abs(base_t - msg.t)))], mount))
     goal = path[-1]
     salient = bool(np.hypot(goal[0] - lidar_pose[0], goal[1] - lidar_pose[1]) < params.scan_epsilon)
     if not salient:
@@ -333,7 +333,7 @@ def _mobile_manipulator_smcs(
         )
     mount = lidar_mount(scene.model(), None, _lidar_site(log, scene))
     robot = robot_model_of(log)
-    hand_world = hand_in_world(
+    hand_world = compose(
         log.base[np.clip(np.searchsorted(log.base_t, log.poi_t), 0, len(log.base_t) - 1)],
         log.poi,
     )
@@ -374,7 +374,7 @@ def _mobile_manipulator_smcs(
             )
             continue
         grip = np.array([c.gripper for c in cmds])
-        world = hand_in_world(base, hand)
+        world = compose(base, hand)
         holding = bool(grip[0] < 0.5)
         cluster = None
         if not holding:  # reaching for something: the object the hand ends at (ML)
@@ -396,7 +396,7 @@ def _mobile_manipulator_smcs(
             action = replace(
                 action,
                 goal_frame="hand",
-                goal=pose_in_pose(world[0], world[-1]),
+                goal=goal_in_hand(world[0], world[-1]),
                 hand_yaw=float(world[0][3] - base[0][2]),
             )
         elif cluster is None:  # nothing to go by: the hand relative to the robot
@@ -404,7 +404,7 @@ def _mobile_manipulator_smcs(
         if drives:
             end = base_path[-1].copy()
             base_goal = (
-                pose_in_pose(world[0], end)
+                goal_in_hand(world[0], end)
                 if holding
                 else end
                 if cluster is None

@@ -34,13 +34,12 @@ from smccli.learn.smc import (
     SalientPerceptions,
     Smc,
     common_symmetry,
-    rotate_z,
     symmetry_rotations,
-    wrap_angle,
 )
 from smccli.perception import Cluster, d_cluster
 from smccli.perception.room import d_room
-from smccli.perception.scan import align_scans, chamfer, pose_compose, se2_to_pose
+from smccli.perception.scan import align_scans, chamfer
+from smccli.world.geometry import compose, rotate_z, se2_pose, wrap, wrap_yaw
 
 INF = math.inf
 
@@ -117,7 +116,7 @@ def align(a: Action, b: Action, params: SmcParams) -> Alignment:
     for theta in symmetry_rotations(symmetry):
         pos = rotate_z(b.goal[:3], theta)
         goal = float(np.linalg.norm(a.goal[:3] - pos))
-        dyaw = wrap_angle(float(a.goal[3] - b.goal[3] - theta), yaw_period)
+        dyaw = wrap(float(a.goal[3] - b.goal[3] - theta), yaw_period)
         goal += params.yaw_scale * abs(dyaw)
         approach = 0.0
         if n:
@@ -132,7 +131,7 @@ def align(a: Action, b: Action, params: SmcParams) -> Alignment:
 def goal_in_a(b: Action, T_ab: np.ndarray) -> np.ndarray:
     """``b``'s scan-frame goal [dx, dy, 0, dyaw] carried into ``a``'s scan frame by
     ``T_ab`` (b's lidar in a's lidar frame)."""
-    x, y, yaw = pose_compose(se2_to_pose(T_ab), b.goal[[0, 1, 3]])
+    x, y, yaw = wrap_yaw(compose(se2_pose(T_ab), b.goal[[0, 1, 3]]))
     return np.array([x, y, 0.0, yaw])
 
 
@@ -156,9 +155,7 @@ def d_a(a: Action, b: Action, params: SmcParams, T_ab: np.ndarray | None = None)
 
 def _pose_gap(a: np.ndarray, b: np.ndarray, params: SmcParams) -> float:
     """Distance of two goals [x, y, z, yaw] without symmetry: position + yaw_scale * |dyaw| [m]."""
-    return float(np.linalg.norm(a[:3] - b[:3])) + params.yaw_scale * abs(
-        wrap_angle(float(a[3] - b[3]))
-    )
+    return float(np.linalg.norm(a[:3] - b[:3])) + params.yaw_scale * abs(wrap(float(a[3] - b[3])))
 
 
 def goal_gap(a: Smc, b: Smc, params: SmcParams) -> float:
@@ -228,7 +225,7 @@ def _mean_cluster(a: Cluster, b: Cluster, wa: float, wb: float) -> Cluster:
     hist = (wa * a.histogram + wb * b.histogram) / (wa + wb)
     hist = hist / max(float(hist.sum()), 1e-12)
     period = a.yaw_period if a.yaw_period > 0 else 2 * math.pi
-    yaw = a.yaw + wb / (wa + wb) * wrap_angle(b.yaw - a.yaw, period)
+    yaw = a.yaw + wb / (wa + wb) * wrap(b.yaw - a.yaw, period)
     return dataclasses.replace(
         a,
         histogram=hist,
@@ -270,9 +267,7 @@ def merge(
     symmetry = common_symmetry(aa.symmetry, ab.symmetry)
     yaw_period = TWO_PI if symmetry >= TWO_PI - 1e-6 else math.pi
     goal = (wa * aa.goal + wb * goal_b) / (wa + wb)
-    goal[3] = wrap_angle(
-        aa.goal[3] + wb / (wa + wb) * wrap_angle(float(goal_b[3] - aa.goal[3]), yaw_period)
-    )
+    goal[3] = wrap(aa.goal[3] + wb / (wa + wb) * wrap(float(goal_b[3] - aa.goal[3]), yaw_period))
     n = min(len(aa.approach), len(ab.approach))
     approach = (wa * aa.approach[:n] + wb * rotate_z(ab.approach[:n], theta)) / (wa + wb)
     action = Action(
@@ -293,8 +288,8 @@ def merge(
         assert aa.base_goal is not None and ab.base_goal is not None
         base_b = np.r_[rotate_z(ab.base_goal[:3], theta), ab.base_goal[3] + theta]
         base_goal = (wa * aa.base_goal + wb * base_b) / (wa + wb)
-        base_goal[3] = wrap_angle(
-            aa.base_goal[3] + wb / (wa + wb) * wrap_angle(float(base_b[3] - aa.base_goal[3]))
+        base_goal[3] = wrap(
+            aa.base_goal[3] + wb / (wa + wb) * wrap(float(base_b[3] - aa.base_goal[3]))
         )
         action = replace(
             action,

@@ -21,21 +21,19 @@ pi/2 (square), 0 (round: every rotation), 2 pi (none). The parallel gripper adds
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from smccli.learn import dmp as dmp_mod
 from smccli.learn.dmp import Dmp
+from smccli.learn.frames import goal_in_object, goal_in_scan, object_yaw
 from smccli.learn.params import SmcParams
 from smccli.perception import Cluster
-from smccli.perception.scan import Scan2D, goal_in_lidar, scan_from_dict, scan_to_dict
+from smccli.perception.scan import Scan2D, scan_from_dict, scan_to_dict
+from smccli.world.geometry import TWO_PI, rotate_z, wrap
 
-TWO_PI = 2 * math.pi
-"""The period of no symmetry [rad]."""
 ROUND_STEPS = 72
 """Rotations tried for a round object (every 5 degrees) when aligning two goals."""
 
@@ -135,26 +133,6 @@ class Smc:
     action: Action
 
 
-def wrap_angle(a: float, period: float = 2 * math.pi) -> float:
-    """``a`` wrapped into [-period/2, period/2) [rad]."""
-    return float((a + period / 2) % period - period / 2)
-
-
-def object_yaw(cluster: Cluster) -> float:
-    """Yaw that defines the object's frame: 0 for round footprints, where yaw is undefined."""
-    return 0.0 if cluster.yaw_period <= 0 else float(cluster.yaw)
-
-
-def goal_in_object(goal_world: np.ndarray, cluster: Cluster) -> np.ndarray:
-    """World POI goal [x, y, z, yaw] -> [dx, dy, dz, dyaw] in the cluster's yawed frame."""
-    yaw = object_yaw(cluster)
-    c, s = math.cos(-yaw), math.sin(-yaw)
-    d = goal_world[:3] - cluster.centroid
-    return np.array(
-        [c * d[0] - s * d[1], s * d[0] + c * d[1], d[2], wrap_angle(goal_world[3] - yaw)]
-    )
-
-
 def symmetry_rotations(period: float) -> np.ndarray:
     """Rotations about z in [0, 2 pi) [rad] that map an object of footprint symmetry
     ``period`` onto itself (a round object: every 2 pi / ROUND_STEPS)."""
@@ -166,11 +144,6 @@ def common_symmetry(a: float, b: float) -> float:
     """The symmetry two estimates of one object share [rad]: the coarser one (round, 0,
     is the finest; none, 2 pi, the coarsest)."""
     return max(a, b)
-
-
-def rotate_z(v: np.ndarray, angle: float) -> np.ndarray:
-    """Points ``v`` (..., 3) rotated by ``angle`` [rad] about z."""
-    return Rotation.from_euler("z", angle).apply(np.asarray(v, dtype=float))
 
 
 def approach_in_frame(
@@ -221,7 +194,7 @@ def action_from_path(
     path[:, 3] = np.unwrap(path[:, 3])
     dmp = dmp_mod.fit(t, path, params.dmp)
     goal_world = path[-1].copy()
-    goal_world[3] = math.remainder(goal_world[3], TWO_PI)
+    goal_world[3] = wrap(goal_world[3])
     if cluster is not None:
         goal, frame = goal_in_object(goal_world, cluster), "object"
         symmetry, frame_yaw = cluster.yaw_period, object_yaw(cluster)
@@ -263,9 +236,9 @@ def action_in_scan_frame(
     dmp = dmp_mod.fit(t, path, params.dmp)
     gx, gy, _, gyaw = path[-1]
     if lidar_pose is None:
-        goal, frame = np.array([gx, gy, 0.0, math.remainder(gyaw, TWO_PI)]), "world"
+        goal, frame = np.array([gx, gy, 0.0, wrap(gyaw)]), "world"
     else:
-        dx, dy, dyaw = goal_in_lidar(np.array([gx, gy, gyaw]), np.asarray(lidar_pose))
+        dx, dy, dyaw = goal_in_scan(np.array([gx, gy, gyaw]), np.asarray(lidar_pose))
         goal, frame = np.array([dx, dy, 0.0, dyaw]), "scan"
     return Action(
         dmp=dmp,
@@ -277,75 +250,6 @@ def action_in_scan_frame(
         approach=np.zeros((0, 3)),
         held_symmetry=TWO_PI,
     )
-
-
-def pose_in_pose(frame: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """``pose`` ``[x, y, z, yaw]`` in the yawed frame of ``frame`` ``[x, y, z, yaw]``:
-    ``[dx, dy, dz, dyaw]`` (a mobile manipulator's goal relative to the hand's start)."""
-    c, s = math.cos(frame[3]), math.sin(frame[3])
-    dx, dy = pose[0] - frame[0], pose[1] - frame[1]
-    return np.array([c * dx + s * dy, -s * dx + c * dy, pose[2] - frame[2], pose[3] - frame[3]])
-
-
-def pose_from_pose(frame: np.ndarray, rel: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`pose_in_pose`: ``rel`` in ``frame``'s yawed frame -> the world."""
-    c, s = math.cos(frame[3]), math.sin(frame[3])
-    return np.array(
-        [
-            frame[0] + c * rel[0] - s * rel[1],
-            frame[1] + s * rel[0] + c * rel[1],
-            frame[2] + rel[2],
-            frame[3] + rel[3],
-        ]
-    )
-
-
-def goal_from_object(
-    goal_obj: np.ndarray,
-    cluster: Cluster,
-    near_yaw: float,
-    *,
-    flip: bool = True,
-    taught_yaw: float | None = None,
-) -> np.ndarray:
-    """Contingent action mapping of the goal (eq. 38-39): object-frame goal -> world.
-
-    The footprint's symmetry (``yaw_period``) and the parallel gripper's (pi) leave several
-    equivalent goal yaws; the one nearest ``near_yaw`` (the current POI yaw) is taken, so
-    the wrist turns as little as possible. The offset turns with the chosen object yaw.
-    ``flip=False`` forbids the gripper's pi: an object without symmetry that is grasped or
-    held keeps its orientation in the hand, so it is not placed turned by pi.
-
-    The gripper's pi and an object's half-turn symmetry give the same goal yaw from two
-    object yaws a half turn apart, which put the offset on opposite sides of the centre.
-    ``taught_yaw`` (the demonstrated cluster's yaw [rad]) settles that tie: the object yaw
-    nearest it keeps the offset on the side it was taught, e.g. towards the camera when the
-    cluster's centre sits behind a bar handle (its posts pull it back). Without it the
-    tie went to whichever side the footprint's yaw wrapped to (3 cm off a handle).
-    """
-    base = object_yaw(cluster)
-    period = cluster.yaw_period if cluster.yaw_period > 0 else math.pi
-    best: tuple[float, float, float, float] | None = None
-    for k_obj in range(-4, 5):
-        obj_yaw = base + k_obj * period
-        if cluster.yaw_period <= 0 and k_obj != 0:
-            continue
-        turn = 0.0 if taught_yaw is None else abs(wrap_angle(obj_yaw - taught_yaw))
-        for k_grip in range(-2, 3) if flip else range(-1, 2):
-            yaw = obj_yaw + goal_obj[3] + k_grip * (math.pi if flip else TWO_PI)
-            dist = abs(yaw - near_yaw)
-            if (
-                best is None
-                or dist < best[0] - 1e-9
-                or (dist < best[0] + 1e-9 and turn < best[3] - 1e-9)
-            ):
-                best = (dist, yaw, obj_yaw, turn)
-    assert best is not None
-    _, yaw, obj_yaw, _ = best
-    c, s = math.cos(obj_yaw), math.sin(obj_yaw)
-    dx, dy, dz = goal_obj[:3]
-    centre = cluster.centroid
-    return np.array([centre[0] + c * dx - s * dy, centre[1] + s * dx + c * dy, centre[2] + dz, yaw])
 
 
 # --- JSON (no pickle: every value is a list of floats, a number or a string) -------------

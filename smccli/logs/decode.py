@@ -6,7 +6,7 @@ import bisect
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
@@ -17,8 +17,9 @@ from smccli.errors import LogError
 from smccli.logs import topics as tp
 from smccli.logs.checks import BadContent, finite, json_message, message_error
 from smccli.logs.images import color_size, decode_color, decode_depth, depth_size
-from smccli.logs.log import CameraFrames, FrameRecord, PointCloudMsg, Scan, pose_matrix
+from smccli.logs.log import CameraFrames, FrameRecord, PointCloudMsg, Scan
 from smccli.logs.records import RawLog
+from smccli.world.geometry import quat_yaw, se3
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
 
@@ -89,60 +90,19 @@ class Decoder:
             raise message_error(self.path, topic, m.log_time, str(e)) from None
 
     def _add(self, topic: str, t_ns: int, msg: Any) -> None:
-        t = t_ns / 1e9
-        if topic == tp.COMMAND:
-            target = finite(self.path, topic, t, msg["target"])
-            gripper = float(finite(self.path, topic, t, msg["gripper"]))
-            base = msg.get("base_target")
-            base = None if base is None else finite(self.path, topic, t, base)
-            self.commands.append(PoiCommand(t=t, target=target, gripper=gripper, base=base))
-        elif topic == tp.JOINT_STATES:
-            self.joint_states.append(self._joint_state(t, msg))
-        elif topic == tp.POI:
-            pos, q = tp.get_pose(msg.pose)
-            finite(self.path, topic, t, [*pos, *q])
-            check_rotation(q, "orientation")
-            self.poi_t.append(t)
-            self.poi.append(np.array([*pos, tp.quat_to_yaw(q)]))
-        elif topic == tp.BASE:
-            pos, q = tp.get_pose(msg.pose)
-            finite(self.path, topic, t, [*pos, *q])
-            check_rotation(q, "orientation")
-            self.base_t.append(t)
-            self.base.append(np.array([pos[0], pos[1], tp.quat_to_yaw(q)]))
-        elif topic == tp.COLOR:
-            self.color.append((t_ns, msg.frame_id, msg.format, msg.data))
-        elif topic == tp.DEPTH:
-            self.depth[(t_ns, msg.frame_id)] = (msg.format, msg.data)
-        elif topic == tp.CALIBRATION:
-            if len(msg.K) != 9:
-                raise BadContent(f"K holds {len(msg.K)} values, expected 9 (3x3, row-major)")
-            K = finite(self.path, topic, t, msg.K).reshape(3, 3)
-            self.calib.setdefault(msg.frame_id, []).append((t_ns, K))
-        elif topic == tp.TF:
-            for tr in msg.transforms:
-                pos, q = tp.get_pose(tr)
-                finite(self.path, topic, t, [*pos, *q])
-                check_rotation(q, f"rotation of {tr.parent_frame_id} -> {tr.child_frame_id}")
-                # The matrix is built for the camera frames that use this pose (``_pose``).
-                self.tf.setdefault(tr.child_frame_id, []).append((t_ns, (pos, q)))
-        elif topic == tp.WEIGHT:
-            self.weight_t.append(t)
-            self.weight.append(float(finite(self.path, topic, t, msg["kg"])))
-        elif topic == tp.SALIENCY:
-            self.marks.append(SaliencyMark(t=t, source=msg["source"], label=msg.get("label", "")))
-        elif topic == tp.GROUND_TRUTH:
-            poses = {k: finite(self.path, topic, t, v) for k, v in msg["poses"].items()}
-            self.ground_truth.append((t, poses))
-        elif topic == tp.DECISION:
-            self.decisions.append({**msg, "t": t})
-        elif topic == tp.POINTS:
-            self.point_clouds.append(decode_points(t, msg))
-        elif topic == tp.SCAN:
-            ranges = np.array(msg.ranges, dtype=float)
-            self.scans.append(Scan(t, msg.start_angle, msg.end_angle, ranges, msg.frame_id))
+        if decode := self._DECODERS.get(topic):
+            decode(self, t_ns / 1e9, t_ns, msg)
 
-    def _joint_state(self, t: float, msg: Any) -> JointState:
+    def _command(self, t: float, t_ns: int, msg: Any) -> None:
+        """PoiCommand: target (4,), gripper, optional base target (3,)."""
+        target = finite(self.path, tp.COMMAND, t, msg["target"])
+        gripper = float(finite(self.path, tp.COMMAND, t, msg["gripper"]))
+        base = msg.get("base_target")
+        base = None if base is None else finite(self.path, tp.COMMAND, t, base)
+        self.commands.append(PoiCommand(t=t, target=target, gripper=gripper, base=base))
+
+    def _joint_states(self, t: float, t_ns: int, msg: Any) -> None:
+        """JointState: names, position, velocity, effort (n,), the names of the first message."""
         j = msg.joints
         names = tuple(x.name for x in j)
         if self.joint_states and names != self.joint_states[0].names:
@@ -154,13 +114,94 @@ class Decoder:
         position = np.array([x.position for x in j])
         if not np.isfinite(position).all():
             raise BadContent("NaN or inf in joint positions")
-        return JointState(
-            t=t,
-            names=names,
-            position=position,
-            velocity=np.array([x.velocity for x in j]),
-            effort=np.array([x.effort for x in j]),
-        )
+        velocity, effort = np.array([x.velocity for x in j]), np.array([x.effort for x in j])
+        self.joint_states.append(JointState(t, names, position, velocity, effort))
+
+    def _checked_pose(
+        self, topic: str, t: float, pose: Any, what: str = "orientation"
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Position (3,) and quaternion (4,) wxyz of a pose, checked finite and a rotation."""
+        pos, q = tp.get_pose(pose)
+        finite(self.path, topic, t, [*pos, *q])
+        check_rotation(q, what)
+        return pos, q
+
+    def _poi(self, t: float, t_ns: int, msg: Any) -> None:
+        """POI pose as (x, y, z, yaw) [m, rad], yaw still wrapped (``unwrap_yaw``)."""
+        pos, q = self._checked_pose(tp.POI, t, msg.pose)
+        self.poi_t.append(t)
+        self.poi.append(np.array([*pos, quat_yaw(q)]))
+
+    def _base(self, t: float, t_ns: int, msg: Any) -> None:
+        """Base pose as (x, y, yaw) [m, rad], yaw still wrapped (``unwrap_yaw``)."""
+        pos, q = self._checked_pose(tp.BASE, t, msg.pose)
+        self.base_t.append(t)
+        self.base.append(np.array([pos[0], pos[1], quat_yaw(q)]))
+
+    def _color(self, t: float, t_ns: int, msg: Any) -> None:
+        self.color.append((t_ns, msg.frame_id, msg.format, msg.data))
+
+    def _depth(self, t: float, t_ns: int, msg: Any) -> None:
+        """The depth image undecoded, keyed by (t [ns], frame_id) like its colour image."""
+        self.depth[(t_ns, msg.frame_id)] = (msg.format, msg.data)
+
+    def _calibration(self, t: float, t_ns: int, msg: Any) -> None:
+        """Intrinsics K (3, 3) per camera frame, in time order."""
+        if len(msg.K) != 9:
+            raise BadContent(f"K holds {len(msg.K)} values, expected 9 (3x3, row-major)")
+        K = finite(self.path, tp.CALIBRATION, t, msg.K).reshape(3, 3)
+        self.calib.setdefault(msg.frame_id, []).append((t_ns, K))
+
+    def _tf(self, t: float, t_ns: int, msg: Any) -> None:
+        for tr in msg.transforms:
+            what = f"rotation of {tr.parent_frame_id} -> {tr.child_frame_id}"
+            pos, q = self._checked_pose(tp.TF, t, tr, what)
+            # The matrix is built for the camera frames that use this pose (``_pose``).
+            self.tf.setdefault(tr.child_frame_id, []).append((t_ns, (pos, q)))
+
+    def _weight(self, t: float, t_ns: int, msg: Any) -> None:
+        """Scale reading [kg]."""
+        self.weight_t.append(t)
+        self.weight.append(float(finite(self.path, tp.WEIGHT, t, msg["kg"])))
+
+    def _saliency(self, t: float, t_ns: int, msg: Any) -> None:
+        """SaliencyMark: source and label (empty if absent)."""
+        self.marks.append(SaliencyMark(t=t, source=msg["source"], label=msg.get("label", "")))
+
+    def _ground_truth(self, t: float, t_ns: int, msg: Any) -> None:
+        """Object name -> pose array, as logged, checked finite."""
+        poses = {k: finite(self.path, tp.GROUND_TRUTH, t, v) for k, v in msg["poses"].items()}
+        self.ground_truth.append((t, poses))
+
+    def _decision(self, t: float, t_ns: int, msg: Any) -> None:
+        """The decision's JSON object, with its time ``t`` [s] added."""
+        self.decisions.append({**msg, "t": t})
+
+    def _points(self, t: float, t_ns: int, msg: Any) -> None:
+        self.point_clouds.append(decode_points(t, msg))
+
+    def _scan(self, t: float, t_ns: int, msg: Any) -> None:
+        """Scan: angles [rad] and ranges (n,) [m]."""
+        ranges = np.array(msg.ranges, dtype=float)
+        self.scans.append(Scan(t, msg.start_angle, msg.end_angle, ranges, msg.frame_id))
+
+    _DECODERS: ClassVar[dict[str, Callable[[Decoder, float, int, Any], None]]] = {
+        tp.COMMAND: _command,
+        tp.JOINT_STATES: _joint_states,
+        tp.POI: _poi,
+        tp.BASE: _base,
+        tp.COLOR: _color,
+        tp.DEPTH: _depth,
+        tp.CALIBRATION: _calibration,
+        tp.TF: _tf,
+        tp.WEIGHT: _weight,
+        tp.SALIENCY: _saliency,
+        tp.GROUND_TRUTH: _ground_truth,
+        tp.DECISION: _decision,
+        tp.POINTS: _points,
+        tp.SCAN: _scan,
+    }
+    """Topic -> decoder(self, t [s], t [ns], message); a topic without one is not stored."""
 
     def frames(self) -> list[CameraFrame]:
         """Colour frames joined with depth (same time), latest calibration and camera pose.
@@ -185,7 +226,7 @@ class Decoder:
             if K is None or pose is None or depth is None:
                 dropped += 1
                 continue
-            out.append(CameraFrame(t_ns / 1e9, rgb, depth, K, pose_matrix(*pose), frame_id))
+            out.append(CameraFrame(t_ns / 1e9, rgb, depth, K, se3(*pose), frame_id))
         self._dropped(dropped)
         return out
 

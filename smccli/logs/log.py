@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from smccli.logs import topics as tp
 from smccli.logs.images import decode_color, decode_depth
+from smccli.world.geometry import se3
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
 
@@ -81,14 +81,7 @@ class CameraFrames:
         depth = np.zeros((0, 0), np.float32)
         if r.depth is not None:
             depth = decode_depth(self.path, r.t_ns, *r.depth, rgb.shape)
-        return CameraFrame(r.t_ns / 1e9, rgb, depth, r.K, pose_matrix(*r.pose), r.frame_id)
-
-
-def pose_matrix(pos: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Homogeneous transform (4, 4) of a position (3,) and quaternion (4,) wxyz."""
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = tp.quat_to_matrix(q), pos
-    return T
+        return CameraFrame(r.t_ns / 1e9, rgb, depth, r.K, se3(*r.pose), r.frame_id)
 
 
 @dataclass(frozen=True, slots=True)

@@ -19,7 +19,6 @@ from __future__ import annotations
 import bisect
 import hashlib
 import io
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,13 +28,13 @@ import numpy as np
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
-from scipy.spatial.transform import Rotation
 
 from smccli.errors import LogError, SceneError
 from smccli.logs import topics as tp
 from smccli.logs.decode import unwrap_yaw
 from smccli.logs.log import Log, PointCloudMsg, Scan
 from smccli.schemas import validate_yaml
+from smccli.world.geometry import quat_matrix, yaw_of
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
 ROLES: dict[str, tuple[str, tuple[str, ...]]] = {
@@ -115,7 +114,7 @@ class _TfBuffer:
         for tr in msg.transforms:
             t, r = tr.transform.translation, tr.transform.rotation
             T = np.eye(4)
-            T[:3, :3] = Rotation.from_quat([r.x, r.y, r.z, r.w]).as_matrix()
+            T[:3, :3] = quat_matrix([r.w, r.x, r.y, r.z])
             T[:3, 3] = [t.x, t.y, t.z]
             parent = tr.header.frame_id.lstrip("/")
             child = tr.child_frame_id.lstrip("/")
@@ -149,10 +148,6 @@ class _TfBuffer:
 
 def _ns(stamp: Any) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-
-
-def _yaw(R: np.ndarray) -> float:
-    return math.atan2(R[1, 0], R[0, 0])
 
 
 # --- reading -----------------------------------------------------------------------------
@@ -355,10 +350,10 @@ class _Builder:
         """A PoseStamped as ``[x, y, z, yaw]`` in the world frame."""
         p, q = msg.pose.position, msg.pose.orientation
         T = np.eye(4)
-        T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+        T[:3, :3] = quat_matrix([q.w, q.x, q.y, q.z])
         T[:3, 3] = [p.x, p.y, p.z]
         T = self._world(topic, msg.header) @ T
-        return np.array([*T[:3, 3], _yaw(T[:3, :3])])
+        return np.array([*T[:3, 3], yaw_of(T[:3, :3])])
 
     def _cloud(self, t: float, msg: Any) -> PointCloudMsg:
         """A PointCloud2's x, y, z (FLOAT32) and packed ``rgb``, moved into the world frame."""

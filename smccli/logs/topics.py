@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import functools
 import json
-import math
 from typing import Any
 
 import cv2
@@ -118,43 +117,7 @@ def stamp(msg: Any, t_ns: int) -> None:
     msg.timestamp.FromNanoseconds(t_ns)
 
 
-# --- rotations (quaternions are w, x, y, z, as MuJoCo's; foxglove's Pose names its fields) ---
-# MuJoCo's mju_* conversions use our convention natively (scalar first) and are fast
-# (~1 us a call); mujoco is imported on first use so reading a log does not load it.
-
-
-def yaw_to_quat(yaw: float) -> np.ndarray:
-    """Rotation about world z by ``yaw`` [rad] -> quaternion (4,) wxyz."""
-    import mujoco
-
-    q = np.empty(4)
-    mujoco.mju_axisAngle2Quat(q, np.array([0.0, 0.0, 1.0]), float(yaw))
-    return q
-
-
-def quat_to_yaw(q: np.ndarray) -> float:
-    """Yaw [rad] of a quaternion wxyz (heading of the rotated x axis), in (-pi, pi]."""
-    R = quat_to_matrix(q)
-    return math.atan2(R[1, 0], R[0, 0])
-
-
-def matrix_to_quat(R: np.ndarray) -> np.ndarray:
-    """Rotation matrix (3, 3) -> unit quaternion (4,) wxyz with w >= 0."""
-    import mujoco
-
-    q = np.empty(4)
-    mujoco.mju_mat2Quat(q, np.ascontiguousarray(R, dtype=np.float64).reshape(9))
-    return -q if q[0] < 0 else q
-
-
-def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Quaternion (4,) wxyz, any norm -> rotation matrix (3, 3)."""
-    import mujoco
-
-    qa = np.asarray(q, dtype=np.float64)
-    m = np.empty(9)
-    mujoco.mju_quat2Mat(m, qa / np.linalg.norm(qa))
-    return m.reshape(3, 3)
+# --- poses (quaternions are w, x, y, z: smccli.world.geometry; foxglove names its fields) ---
 
 
 def set_pose(pose: Any, position: np.ndarray, quat: np.ndarray) -> None:

@@ -26,6 +26,7 @@ from smccli import __version__
 from smccli.errors import LogError, OutputExistsError
 from smccli.logs import topics as tp
 from smccli.outputs import check_output
+from smccli.world.geometry import matrix_quat, yaw_quat
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
 if TYPE_CHECKING:
@@ -271,7 +272,7 @@ class LogWriter:
         """POI ``[x, y, z, yaw]`` as a PoseInFrame (rotation about z) in ``frame`` (a mobile
         manipulator's: ``base``) and tf frame->poi."""
         p = _finite("POI", poi)
-        t_ns, q = tp.to_ns(t), tp.yaw_to_quat(float(p[3]))
+        t_ns, q = tp.to_ns(t), yaw_quat(float(p[3]))
         msg = PoseInFrame(frame_id=frame)
         tp.stamp(msg, t_ns)
         tp.set_pose(msg.pose, p[:3], q)
@@ -282,7 +283,7 @@ class LogWriter:
         """A mobile manipulator's base pose ``[x, y, yaw]`` (odometry) on ``/robot/base``
         and tf world->base."""
         p = _finite("base pose", pose)
-        t_ns, q = tp.to_ns(t), tp.yaw_to_quat(float(p[2]))
+        t_ns, q = tp.to_ns(t), yaw_quat(float(p[2]))
         position = np.array([p[0], p[1], 0.0])
         msg = PoseInFrame(frame_id=tp.WORLD)
         tp.stamp(msg, t_ns)
@@ -333,7 +334,7 @@ class LogWriter:
         )
         tp.stamp(calib, t_ns)
         self._proto(tp.CALIBRATION, t_ns, calib)
-        self._tf(t_ns, frame.frame_id, T[:3, 3], tp.matrix_to_quat(T[:3, :3]))
+        self._tf(t_ns, frame.frame_id, T[:3, 3], matrix_quat(T[:3, :3]))
 
     def write_weight(self, t: float, kg: float) -> None:
         self.write_json(tp.WEIGHT, t, {"kg": float(kg)})
@@ -398,14 +399,14 @@ class LogWriter:
         """
         if T_world_frame is not None:
             W = np.asarray(T_world_frame, dtype=float)
-            self._tf(tp.to_ns(t), frame_id, W[:3, 3], tp.matrix_to_quat(W[:3, :3]))
+            self._tf(tp.to_ns(t), frame_id, W[:3, 3], matrix_quat(W[:3, :3]))
         msg = LaserScan(frame_id=frame_id, start_angle=start_angle, end_angle=end_angle)
         tp.stamp(msg, tp.to_ns(t))
         msg.ranges.extend(np.asarray(ranges, dtype=float).tolist())
         if intensities is not None:
             msg.intensities.extend(np.asarray(intensities, dtype=float).tolist())
         T = np.eye(4) if T_frame_scan is None else np.asarray(T_frame_scan, dtype=float)
-        tp.set_pose(msg.pose, T[:3, 3], tp.matrix_to_quat(T[:3, :3]))
+        tp.set_pose(msg.pose, T[:3, 3], matrix_quat(T[:3, :3]))
         self._proto(tp.SCAN, tp.to_ns(t), msg)
 
     def write_robot_pose(self, sim: Sim) -> None:

@@ -11,6 +11,7 @@ import open3d as o3d
 from smccli.perception.cloud import object_points_on_planes, plane_distance, support_plane
 from smccli.perception.histogram import hsv_histogram
 from smccli.perception.params import PerceptionParams
+from smccli.world.geometry import wrap
 from smccli.world.sensors import CameraFrame, RobotGeometry
 
 
@@ -44,18 +45,6 @@ class Cluster:
     def location(self) -> np.ndarray:
         """``[x, y, z, yaw]``, shape (4,) [m, m, m, rad]."""
         return np.r_[self.centroid, self.yaw]
-
-
-def _wrap_half_pi(a: float) -> float:
-    """Wrap an axis direction (defined modulo pi) into (-pi/2, pi/2]."""
-    a = (a + np.pi / 2) % np.pi - np.pi / 2  # [-pi/2, pi/2)
-    return np.pi / 2 if a <= -np.pi / 2 + 1e-12 else float(a)
-
-
-def _wrap_pi(a: float) -> float:
-    """Wrap a direction into (-pi, pi]."""
-    a = float(np.arctan2(np.sin(a), np.cos(a)))
-    return np.pi if a <= -np.pi + 1e-12 else a
 
 
 def outside_hull(xy: np.ndarray, hull: np.ndarray) -> np.ndarray:
@@ -160,10 +149,9 @@ def describe_cluster(
     if yaw_period == 0.0:
         yaw = 0.0
     elif yaw_period == np.pi:
-        yaw = _wrap_half_pi(float(np.arctan2(long_edge[1], long_edge[0])))
-    else:  # square: report a side's direction in [-pi/4, pi/4), the period is pi/2
-        a = float(np.arctan2(long_edge[1], long_edge[0]))
-        yaw = float((a + np.pi / 4) % (np.pi / 2) - np.pi / 4)
+        yaw = wrap(float(np.arctan2(long_edge[1], long_edge[0])), np.pi)
+    else:  # square: report a side's direction in (-pi/4, pi/4], the period is pi/2
+        yaw = wrap(float(np.arctan2(long_edge[1], long_edge[0])), np.pi / 2)
     return Cluster(
         centroid=np.array([cx, cy, base_z + height / 2]),
         yaw=yaw,
@@ -197,7 +185,7 @@ def _describe_asymmetric(
     # mean sideways; the middle of its lateral extent does not lean (its top is seen whole).
     c, s = np.cos(yaw), np.sin(yaw)
     along, across = d[:, 0] * c + d[:, 1] * s, d[:, 1] * c - d[:, 0] * s
-    yaw = _wrap_pi(yaw + np.arctan2(0.5 * (across.max() + across.min()), along.mean()))
+    yaw = wrap(yaw + float(np.arctan2(0.5 * (across.max() + across.min()), along.mean())))
     # The body is what lies over the top's hull (walls are within a pixel, 3-6 mm, of it);
     # mirroring the handle's root, 5-10 mm out, would lengthen the far side.
     near = dist <= 0.5 * params.protrusion_margin

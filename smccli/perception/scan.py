@@ -7,12 +7,11 @@ the lidar's pose, from odometry, when the scan was taken. Three things are built
   12 yaw seeds (ICP alone converges from about 30 deg / 0.5 m only, DESIGN.md section 9);
 * :func:`scan_distance` -- d_P of two scans (eq. 12), 0 for the same place, >= 1 for
   clearly different places: a trimmed chamfer distance after alignment, over a scale;
-* :func:`goal_in_lidar` and :func:`map_goal` -- the goal mapping of eq. 38-39 for a base
-  goal (x, y, theta): a demo goal stored relative to the demo scan is carried over to the
-  current scan, so that odometry's drift between demo and execution cancels.
+* the transform that carries a base goal stored with the demo scan over to the current
+  scan (eq. 38-39, :mod:`smccli.learn.frames`), so that odometry's drift cancels.
 
 Poses are (x, y, theta) arrays [m, m, rad]; transforms are 3x3 homogeneous SE(2)
-matrices, ``T_a_b`` mapping points of frame b into frame a.
+matrices, ``T_a_b`` mapping points of frame b into frame a (:mod:`smccli.world.geometry`).
 """
 
 from __future__ import annotations
@@ -23,58 +22,11 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
 
+from smccli.world.geometry import se2, se2_pose, se2_se3
+
 _REG = o3d.pipelines.registration
 _MIN_POINTS = 10
 """Fewer valid beams than this make no outline to align [points]."""
-
-
-# --- SE(2) ---------------------------------------------------------------------------------
-
-
-def _wrap(a: float) -> float:
-    """An angle wrapped into (-pi, pi] [rad]."""
-    a = float(np.arctan2(np.sin(a), np.cos(a)))
-    return np.pi if a <= -np.pi + 1e-12 else a
-
-
-def pose_to_se2(pose: np.ndarray | tuple[float, float, float]) -> np.ndarray:
-    """(x, y, theta) [m, m, rad] -> 3x3 homogeneous transform."""
-    x, y, th = (float(v) for v in pose)
-    c, s = np.cos(th), np.sin(th)
-    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
-
-
-def se2_to_pose(T: np.ndarray) -> np.ndarray:
-    """3x3 (or 4x4, planar part) homogeneous transform -> (x, y, theta), theta in (-pi, pi].
-
-    Reads only the x-y block, so a 4x4 with a stray roll, pitch or z (ICP in 3-D) is
-    projected onto SE(2).
-    """
-    T = np.asarray(T, dtype=np.float64)
-    t = T[:2, -1]
-    return np.array([t[0], t[1], _wrap(np.arctan2(T[1, 0], T[0, 0]))])
-
-
-def pose_compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a * b for poses (x, y, theta): b expressed in a's frame -> b in a's parent frame."""
-    return se2_to_pose(pose_to_se2(a) @ pose_to_se2(b))
-
-
-def pose_inverse(a: np.ndarray) -> np.ndarray:
-    """a^-1 for a pose (x, y, theta)."""
-    return se2_to_pose(np.linalg.inv(pose_to_se2(a)))
-
-
-def _se2_to_4x4(T: np.ndarray) -> np.ndarray:
-    M = np.eye(4)
-    M[:2, :2] = T[:2, :2]
-    M[:2, 3] = T[:2, 2]
-    return M
-
-
-def _project_se2(M: np.ndarray) -> np.ndarray:
-    """4x4 from open3d -> the nearest SE(2) 3x3 (yaw from the x-y block, z dropped)."""
-    return pose_to_se2(se2_to_pose(M))
 
 
 # --- the scan ------------------------------------------------------------------------------
@@ -217,7 +169,7 @@ class ScanAlignment:
     @property
     def pose(self) -> np.ndarray:
         """The transform as (x, y, yaw) [m, m, rad], yaw in (-pi, pi]."""
-        return se2_to_pose(self.T_target_source)
+        return se2_pose(self.T_target_source)
 
 
 def _normals_2d(xy: np.ndarray, k: int) -> np.ndarray:
@@ -281,11 +233,11 @@ def align_scans(
     criteria = _REG.ICPConvergenceCriteria(max_iteration=params.max_iterations)
 
     def icp(T: np.ndarray, distance: float) -> np.ndarray:
-        r = _REG.registration_icp(src, tgt, distance, _se2_to_4x4(T), est, criteria)
-        return _project_se2(r.transformation)
+        r = _REG.registration_icp(src, tgt, distance, se2_se3(T), est, criteria)
+        return se2(se2_pose(r.transformation))  # the nearest SE(2): yaw of the x-y block
 
     def score(T: np.ndarray) -> tuple[float, float]:
-        e = _REG.evaluate_registration(src, tgt, params.inlier_distance, _se2_to_4x4(T))
+        e = _REG.evaluate_registration(src, tgt, params.inlier_distance, se2_se3(T))
         return float(e.fitness), float(e.inlier_rmse)
 
     c_t, c_s = xy_t.mean(axis=0), xy_s.mean(axis=0)
@@ -296,7 +248,7 @@ def align_scans(
         * np.arange(params.n_seeds if search or initial is None else 0)
         / max(params.n_seeds, 1)
     ):
-        T = pose_to_se2((0.0, 0.0, yaw))
+        T = se2((0.0, 0.0, yaw))
         T[:2, 2] = c_t - T[:2, :2] @ c_s
         seeds.append(T)
     if initial is not None:
@@ -392,29 +344,3 @@ def scan_distance(a: Scan2D, b: Scan2D, params: ScanParams | None = None) -> flo
 
 
 # --- goal mapping (eq. 38-39) --------------------------------------------------------------
-
-
-def goal_in_lidar(goal_world: np.ndarray, lidar_world: np.ndarray) -> np.ndarray:
-    """G_rel = L_demo^-1 * G_demo: a demonstrated base goal (x, y, theta) in the frame of
-    the lidar at the demo scan, both poses in odometry's world frame.
-
-    Stored with the scan, it no longer depends on where odometry's world frame was during
-    the demo.
-    """
-    return pose_compose(pose_inverse(lidar_world), goal_world)
-
-
-def map_goal(
-    goal_rel: np.ndarray, T_demo_now: np.ndarray | ScanAlignment, lidar_now: np.ndarray
-) -> np.ndarray:
-    """The goal x_f* of eq. 38-39 for a goal stored with a scan: G_now = L_now * T^-1 * G_rel.
-
-    ``goal_rel`` from :func:`goal_in_lidar`; ``T_demo_now`` = :func:`align_scans` (target =
-    the demo scan, source = the current scan), i.e. the current lidar in the demo lidar's
-    frame; ``lidar_now`` the current lidar pose in odometry's world frame. Returns the
-    base goal (x, y, theta) in today's odometry frame: the demonstrated place in the room,
-    whatever odometry's drift since the demo.
-    """
-    T = T_demo_now.T_target_source if isinstance(T_demo_now, ScanAlignment) else T_demo_now
-    G = pose_to_se2(lidar_now) @ np.linalg.inv(np.asarray(T)) @ pose_to_se2(goal_rel)
-    return se2_to_pose(G)

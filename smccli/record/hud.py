@@ -22,8 +22,8 @@ from typing import Any
 
 import mujoco
 import numpy as np
-from scipy.spatial.transform import Rotation
 
+from smccli.world.geometry import quat_matrix, yaw_of, yaw_quat
 from smccli.world.sim import MARKER_RADIUS, Sim
 
 TARGET_RGBA = np.array([1.0, 0.1, 0.9, 0.7], dtype=np.float32)
@@ -85,7 +85,7 @@ def to_world(sim: Sim, target: np.ndarray) -> tuple[np.ndarray, float]:
     """A target ``[x, y, z, yaw]`` in the command's frame as a world position (3,) [m] and
     yaw [rad]."""
     R, p = sim.poi_frame()
-    yaw_frame = math.atan2(R[1, 0], R[0, 0])
+    yaw_frame = yaw_of(R)
     return p + R @ np.asarray(target[:3], dtype=float), float(target[3]) + yaw_frame
 
 
@@ -96,8 +96,7 @@ def from_world(sim: Sim, pos: np.ndarray, quat: np.ndarray, keep_z: float) -> np
     (a mobile base's)."""
     R, p = sim.poi_frame()
     local = R.T @ (np.asarray(pos, dtype=float) - p)
-    w, x, y, z = quat
-    axis = Rotation.from_quat([x, y, z, w]).as_matrix()[:, 0]
+    axis = quat_matrix(quat)[:, 0]
     axis_local = R.T @ axis
     yaw = math.atan2(axis_local[1], axis_local[0])
     z_out = keep_z if sim.robot.base is not None and not sim.robot.arm_joints else local[2]
@@ -111,7 +110,7 @@ def place_marker(sim: Sim, target: np.ndarray) -> None:
     pos, yaw = to_world(sim, target)
     mocap = sim.model.body_mocapid[sim.marker_id]
     sim.data.mocap_pos[mocap] = pos
-    sim.data.mocap_quat[mocap] = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
+    sim.data.mocap_quat[mocap] = yaw_quat(yaw)
 
 
 def marker_pose(sim: Sim) -> tuple[np.ndarray, np.ndarray] | None:
@@ -141,7 +140,7 @@ def draw_scene(scn: Any, sim: Sim, state: HudState) -> None:
     line between them into the viewer's user scene ``scn`` (cleared first)."""
     scn.ngeom = 0
     pos, yaw = to_world(sim, state.target)
-    rot = Rotation.from_euler("z", yaw).as_matrix()
+    rot = quat_matrix(yaw_quat(yaw))
     if sim.marker_id < 0:
         _geom(scn, mujoco.mjtGeom.mjGEOM_SPHERE, [MARKER_RADIUS, 0, 0], pos, np.eye(3), TARGET_RGBA)
     rgba = OPEN_RGBA if state.gripper_open else CLOSED_RGBA

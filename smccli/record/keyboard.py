@@ -90,7 +90,7 @@ from smccli.record.hud import (
     texts,
 )
 from smccli.record.operators import OperatorOutput
-from smccli.world.controller import wrap
+from smccli.world.geometry import wrap
 from smccli.world.sensors import PoiCommand, SaliencyMark
 from smccli.world.sim import HIDDEN_GROUP, Sim
 

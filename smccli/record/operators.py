@@ -22,10 +22,11 @@ import numpy as np
 
 from smccli.errors import ScriptError
 from smccli.schemas import SchemaProblem, YamlDocument, check_yaml, key_path, parse_yaml
-from smccli.world.controller import home_poi, reachable, wrap
+from smccli.world.controller import home_poi, reachable
+from smccli.world.geometry import between, compose, near, wrap
 from smccli.world.layout import nominal_layout, sample_layout
 from smccli.world.scene import ROBOT_KEY, Layout, Scene
-from smccli.world.sensors import PoiCommand, SaliencyMark, hand_in_base, hand_in_world
+from smccli.world.sensors import PoiCommand, SaliencyMark
 from smccli.world.sim import Sim
 
 TREMOR_TIME_CONSTANT = 0.15
@@ -374,14 +375,12 @@ class ScriptOperator:
                 act.goal = np.array([*step.hand, yaw])  # type: ignore[misc]
             # The parallel gripper is symmetric under a half turn: the wrist turns the
             # short way to either of the two yaws.
-            act.goal[3] = self._target[3] + math.remainder(
-                float(act.goal[3] - self._target[3]), math.pi
-            )
+            act.goal[3] = near(float(act.goal[3]), float(self._target[3]), math.pi)
         elif step.place is None:  # the hand moves in the world
-            act.world_start = hand_in_world(b0, self._target)
+            act.world_start = compose(b0, self._target)
             act.world_goal = self._goal(step, base=b1)
             act.world_goal[3] = act.world_start[3] + wrap(act.world_goal[3] - act.world_start[3])
-            act.goal = hand_in_base(b1, act.world_goal)
+            act.goal = between(b1, act.world_goal)
         else:  # it rides with the base
             act.goal = self._target.copy()
         act.start = self._target.copy()
@@ -437,11 +436,11 @@ class ScriptOperator:
         # The gripper is symmetric under a half turn: take the yaw (mod π) nearest the
         # wrist's comfortable yaw, which points along the arm (base yaw = atan2(y, x), in
         # the base's frame for a mobile manipulator).
-        local = goal if base is None else hand_in_base(base, goal)
+        local = goal if base is None else between(base, goal)
         comfort = math.atan2(local[1], local[0]) + (0.0 if base is None else float(base[2]))
         if base is not None and self._gripper < 0.5 and self._base is not None:
             # Holding a handle, a person turns the wrist with it, never round by half a turn.
-            comfort = float(hand_in_world(self._base, self._target)[3])
+            comfort = float(compose(self._base, self._target)[3])
         goal[3] = comfort + wrap(2 * (goal[3] - comfort)) / 2
         return goal
 
@@ -464,7 +463,7 @@ class ScriptOperator:
             self._base = act.base_start + s * (act.base_goal - act.base_start)
         if act.world_start is not None and act.world_goal is not None and self._base is not None:
             hand = act.world_start + s * (act.world_goal - act.world_start)
-            self._target = hand_in_base(self._base, hand)
+            self._target = between(self._base, hand)
         else:  # in the robot's frame (a go_to's hand rides along: start = goal)
             self._target = act.start + s * (act.goal - act.start)
         if tau < 1.0:

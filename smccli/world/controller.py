@@ -28,6 +28,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 from smccli.errors import SceneError
+from smccli.world.geometry import wrap, yaw_of
 from smccli.world.robot import Robot
 
 # Flip so that the POI z axis points down; the yaw then rotates about world z.
@@ -49,15 +50,9 @@ def target_rotation(yaw: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ _DOWN
 
 
-def wrap(angle: float) -> float:
-    """Angle wrapped to (−π, π] [rad]."""
-    return math.pi - (math.pi - angle) % (2 * math.pi)
-
-
 def poi_pose(data: mujoco.MjData, site_id: int) -> np.ndarray:
     """POI ``[x, y, z, yaw]`` from a site's pose; yaw is that of the site's x axis."""
-    R = data.site_xmat[site_id].reshape(3, 3)
-    return np.array([*data.site_xpos[site_id], math.atan2(R[1, 0], R[0, 0])])
+    return np.array([*data.site_xpos[site_id], yaw_of(data.site_xmat[site_id])])
 
 
 def _svd(J: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -247,8 +242,7 @@ class CartesianController:
 
     def _yaw_subgoal(self, q: np.ndarray, target: np.ndarray) -> np.ndarray:
         """:meth:`yaw_subgoal` at the kinematics last set (those of ``q``), into a buffer."""
-        R = self.data.site_xmat[self.site_id]  # row-major 3 x 3
-        yaw = math.atan2(R[3], R[0])
+        yaw = yaw_of(self.data.site_xmat[self.site_id])
         x, y, _, target_yaw = target.tolist()
         q_first, q_last_now = q[0].item(), q[-1].item()
         d = wrap(target_yaw - yaw)

@@ -18,6 +18,7 @@ import numpy as np
 
 from smccli.errors import SceneError
 from smccli.schemas import check_yaml, parse_yaml
+from smccli.world.geometry import yaw_quat
 from smccli.world.robot import robot_geoms
 from smccli.world.scene import ROBOT_KEY, Layout, Scene
 
@@ -103,16 +104,7 @@ def start_collisions(scene: Scene, layout: Layout) -> list[str]:
         pos0, quat0 = m.body_pos.copy(), m.body_quat.copy()
         try:
             mujoco.mj_resetData(m, d)
-            for name, (x, y, z, yaw) in layout.items():
-                quat = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
-                if name == ROBOT_KEY:
-                    continue
-                b = m.body(name).id
-                if m.body_jntadr[b] >= 0 and m.jnt_type[m.body_jntadr[b]] == 0:  # free
-                    qa = m.jnt_qposadr[m.body_jntadr[b]]
-                    d.qpos[qa : qa + 7] = [x, y, z, *quat]
-                else:
-                    m.body_pos[b], m.body_quat[b] = [x, y, z], quat
+            place_objects(m, d, {k: v for k, v in layout.items() if k != ROBOT_KEY})
             if robot.base is not None and ROBOT_KEY in layout:
                 x, y, _, yaw = layout[ROBOT_KEY]
                 for j, q in zip(robot.base.joints, (x, y, yaw), strict=True):
@@ -135,6 +127,21 @@ def start_collisions(scene: Scene, layout: Layout) -> list[str]:
             return sorted(hit)
         finally:
             m.body_pos[:], m.body_quat[:] = pos0, quat0
+
+
+def place_objects(m: mujoco.MjModel, d: mujoco.MjData, layout: Layout) -> None:
+    """Put each object of ``layout`` (name -> ``[x, y, z, yaw]``, no robot key) where it
+    says: a free body by its joint, a static one (a scale, a fixed bin) by its body's own
+    pose in the model."""
+    for name, (x, y, z, yaw) in layout.items():
+        b = m.body(name).id
+        quat = yaw_quat(yaw)
+        j = m.body_jntadr[b]
+        if j >= 0 and m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
+            qa = m.jnt_qposadr[j]
+            d.qpos[qa : qa + 7] = [x, y, z, *quat]
+        else:
+            m.body_pos[b], m.body_quat[b] = [x, y, z], quat
 
 
 def _draw(

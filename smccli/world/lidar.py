@@ -16,6 +16,7 @@ import mujoco
 import numpy as np
 
 from smccli.errors import SceneError
+from smccli.world.geometry import between, wrap, yaw_of
 
 N_GROUPS = 6
 """MuJoCo's geom groups, 0-5."""
@@ -97,7 +98,7 @@ class Lidar:
         )
         ranges = self._dist.copy()
         ranges[(self._geomid < 0) | (ranges > self.range_max)] = np.inf
-        yaw = math.atan2(R[1, 0], R[0, 0])
+        yaw = yaw_of(R)
         return LidarReading(
             t=float(data.time),
             ranges=ranges,
@@ -115,15 +116,12 @@ def lidar_mount(model: mujoco.MjModel, poi_site: str | None, lidar_site: str) ->
     the reference configuration (its hand's POI does not ride the base rigidly)."""
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)
-    poses = [(np.zeros(2), 0.0)] if poi_site is None else []
+    poses = [np.zeros(3)] if poi_site is None else []
     for name in (lidar_site,) if poi_site is None else (poi_site, lidar_site):
         i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
         if i < 0:
             raise SceneError(f"model has no site {name!r}")
-        R = data.site_xmat[i].reshape(3, 3)
-        poses.append((data.site_xpos[i][:2].copy(), math.atan2(R[1, 0], R[0, 0])))
-    (p0, y0), (p1, y1) = poses
-    c, s = math.cos(y0), math.sin(y0)
-    d = p1 - p0
-    yaw = math.atan2(math.sin(y1 - y0), math.cos(y1 - y0))
-    return np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], yaw])
+        poses.append(np.array([*data.site_xpos[i][:2], yaw_of(data.site_xmat[i])]))
+    mount = between(*poses)
+    mount[2] = wrap(mount[2])
+    return mount

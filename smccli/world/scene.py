@@ -25,6 +25,7 @@ import numpy as np
 
 from smccli.errors import LogError, SceneError
 from smccli.schemas import KeyPath, parse_yaml, validate_yaml
+from smccli.world.geometry import yaw_quat
 from smccli.world.noise import IDEAL, SensorNoise, parse_noise
 from smccli.world.robot import (
     DEFAULT_ROBOT,
@@ -729,10 +730,6 @@ def _digest(yaml_text: str, mjcf_text: str) -> str:
     return "sha256:" + h.hexdigest()
 
 
-def _yaw_quat(yaw: float) -> list[float]:
-    return [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
-
-
 MUG_HANDLE_SPAN = 0.3
 """A mug's handle spans z = ±this × height about the centre: its top is 20 % of the height
 below the rim, so the top layer perception sees is the rim alone."""
@@ -769,7 +766,7 @@ def _mug_parts(sx: float, sy: float, sz: float) -> list[tuple[Any, list[float], 
 def _add_object(spec: mujoco.MjSpec, obj: ObjectSpec) -> None:
     """Add ``obj`` as a body of primitives; free unless ``obj.fixed``."""
     x, y, z, yaw = obj.pose
-    body = spec.worldbody.add_body(name=obj.name, pos=[x, y, z], quat=_yaw_quat(yaw))
+    body = spec.worldbody.add_body(name=obj.name, pos=[x, y, z], quat=yaw_quat(yaw))
     if not obj.fixed:
         body.add_freejoint(name=f"{obj.name}_joint")
     sx, sy, sz = (s / 2 for s in obj.size)

@@ -14,33 +14,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
-def hand_in_base(base: np.ndarray, hand: np.ndarray) -> np.ndarray:
-    """Hand poses ``[x, y, z, yaw]`` (4,) or (N, 4) in the world -> in the frame of the base
-    at ``[x, y, yaw]`` (3,) or (N, 3) (a mobile manipulator's two POIs, DESIGN.md 9)."""
-    base, hand = np.asarray(base, dtype=float), np.asarray(hand, dtype=float)
-    c, s = np.cos(base[..., 2]), np.sin(base[..., 2])
-    dx, dy = hand[..., 0] - base[..., 0], hand[..., 1] - base[..., 1]
-    return np.stack(
-        [c * dx + s * dy, -s * dx + c * dy, hand[..., 2], hand[..., 3] - base[..., 2]], -1
-    )
-
-
-def hand_in_world(base: np.ndarray, hand: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`hand_in_base`: hand poses in the base's frame -> in the world."""
-    base, hand = np.asarray(base, dtype=float), np.asarray(hand, dtype=float)
-    c, s = np.cos(base[..., 2]), np.sin(base[..., 2])
-    x, y = hand[..., 0], hand[..., 1]
-    return np.stack(
-        [
-            base[..., 0] + c * x - s * y,
-            base[..., 1] + s * x + c * y,
-            hand[..., 2],
-            hand[..., 3] + base[..., 2],
-        ],
-        -1,
-    )
-
-
 @dataclass(frozen=True, slots=True)
 class PoiCommand:
     """What an operator (or the tree) asks the Cartesian controller for."""

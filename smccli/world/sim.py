@@ -15,8 +15,16 @@ import mujoco
 import numpy as np
 
 from smccli.errors import SceneError
-from smccli.world.controller import CartesianController, poi_pose, wrap
-from smccli.world.layout import nominal_layout
+from smccli.world.controller import CartesianController, poi_pose
+from smccli.world.geometry import (
+    between,
+    compose,
+    inverse,
+    planar_se3,
+    wrap,
+    yaw_of,
+)
+from smccli.world.layout import nominal_layout, place_objects
 from smccli.world.lidar import Lidar, LidarReading
 from smccli.world.noise import NoisySensors
 from smccli.world.robot import robot_geoms
@@ -55,28 +63,6 @@ class Success:
 
     def __bool__(self) -> bool:
         return self.ok
-
-
-def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a * b for planar poses (x, y, yaw): b given in a's frame -> in a's parent frame."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], a[2] + b[2]])
-
-
-def _between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a^-1 * b for planar poses: b in a's frame."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    dx, dy = b[0] - a[0], b[1] - a[1]
-    return np.array([c * dx + s * dy, -s * dx + c * dy, wrap(float(b[2] - a[2]))])
-
-
-def _planar(pose: np.ndarray) -> np.ndarray:
-    """A planar pose (x, y, yaw) as a 4 x 4 transform."""
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    T = np.eye(4)
-    T[:2, :2] = [[c, -s], [s, c]]
-    T[:2, 3] = pose[:2]
-    return T
 
 
 @dataclass(frozen=True, slots=True)
@@ -236,17 +222,13 @@ class Sim:
         if base_pose is None:
             base_pose = np.zeros(3) if start is None else np.array([start[0], start[1], start[3]])
         base_pose = np.asarray(base_pose, dtype=float)
-        for name, (x, y, z, yaw) in layout.items():
-            if name not in self._body:
-                valid = ", ".join(self._body)
-                raise SceneError(f"layout: no object {name!r} in scene {self.scene.name} ({valid})")
-            quat = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
-            if name in self._free_qadr:
-                qa, _ = self._free_qadr[name]
-                d.qpos[qa : qa + 7] = [x, y, z, *quat]
-            else:  # static: move the body itself (the scale, fixed bins)
-                m.body_pos[self._body[name]] = [x, y, z]
-                m.body_quat[self._body[name]] = quat
+        unknown = [name for name in layout if name not in self._body]
+        if unknown:
+            raise SceneError(
+                f"layout: no object {unknown[0]!r} in scene {self.scene.name}"
+                f" ({', '.join(self._body)})"
+            )
+        place_objects(m, d, layout)
         # Objects the layout leaves out (another variant's) leave the world.
         self._park([o for o in self.scene.objects if o.name not in layout])
         self.present = tuple(n for n in layout)
@@ -344,8 +326,8 @@ class Sim:
             )
             # The target is in odometry's frame: the same place relative to the robot in
             # the joints' frame (identity without drift).
-            odom_to_true = _compose(self._odom_truth, _between(self._odom, np.zeros(3)))
-            x, y, yaw = _compose(odom_to_true, base)
+            odom_to_true = compose(self._odom_truth, inverse(self._odom))
+            x, y, yaw = compose(odom_to_true, base)
             yaw_now = float(self.data.qpos[self._base_q[2]])
             yaw = yaw_now + wrap(float(yaw) - yaw_now)
             self.data.ctrl[self._base_act] = [x, y, yaw]
@@ -359,11 +341,11 @@ class Sim:
         if self.drift is None:
             self._odom, self._odom_truth = now.copy(), now.copy()
             return
-        delta = _between(self._odom_truth, now)
+        delta = between(self._odom_truth, now)  # a period's motion: in (-pi, pi] already
         dist = math.hypot(delta[0], delta[1])
         k = 1.0 + self.drift.scale
         err = np.array([k * delta[0], k * delta[1], delta[2] + self.drift.yaw_per_metre * dist])
-        self._odom = _compose(self._odom, err)
+        self._odom = compose(self._odom, err)
         self._odom_truth = now.copy()
 
     def settle(self, seconds: float) -> None:
@@ -383,7 +365,7 @@ class Sim:
             R_b = d.xmat[b].reshape(3, 3)
             R = R_b.T @ d.site_xmat[self.poi_id].reshape(3, 3)
             p = R_b.T @ (d.site_xpos[self.poi_id] - d.xpos[b])
-            return np.array([*p, math.atan2(R[1, 0], R[0, 0])])
+            return np.array([*p, yaw_of(R)])
         if len(self._base_q):
             x, y, yaw = self.base_odometry()
             return (
@@ -417,11 +399,11 @@ class Sim:
         if self._lidar_site < 0:
             return None
         d = self.data
-        R = d.site_xmat[self._lidar_site].reshape(3, 3)
-        site = np.array([*d.site_xpos[self._lidar_site][:2], math.atan2(R[1, 0], R[0, 0])])
-        mount = _between(self._base_truth(), site)
-        out = _compose(self.base_odometry(), mount)
-        out[2] = wrap(float(out[2]))
+        site = np.array([*d.site_xpos[self._lidar_site][:2], yaw_of(d.site_xmat[self._lidar_site])])
+        mount = between(self._base_truth(), site)
+        mount[2] = wrap(mount[2])
+        out = compose(self.base_odometry(), mount)
+        out[2] = wrap(out[2])
         return out
 
     def gripper_opening(self) -> float:
@@ -544,15 +526,14 @@ class Sim:
         T[:3, :3] = self.data.cam_xmat[self._cam_id].reshape(3, 3) @ np.diag([1.0, -1.0, -1.0])
         T[:3, 3] = self.data.cam_xpos[self._cam_id]
         if len(self._base_q) and self.drift is not None:
-            T = _planar(self.base_odometry()) @ np.linalg.inv(_planar(self._base_truth())) @ T
+            T = planar_se3(self.base_odometry()) @ np.linalg.inv(planar_se3(self._base_truth())) @ T
         return T
 
     def _base_truth(self) -> np.ndarray:
         """The base body's planar pose from the joints ``[x, y, yaw]`` (what odometry
         integrates; used only to express mountings relative to the base)."""
         d, b = self.data, self._base_body
-        R = d.xmat[b].reshape(3, 3)
-        return np.array([d.xpos[b][0], d.xpos[b][1], math.atan2(R[1, 0], R[0, 0])])
+        return np.array([d.xpos[b][0], d.xpos[b][1], yaw_of(d.xmat[b])])
 
     def close(self) -> None:
         """Free the renderer's GL context."""
@@ -627,8 +608,7 @@ class Sim:
         b = self._body.get(name)
         if b is None:
             b = self._id(mujoco.mjtObj.mjOBJ_BODY, name)
-        R = self.data.xmat[b].reshape(3, 3)
-        return np.array([*self.data.xpos[b], math.atan2(R[1, 0], R[0, 0])])
+        return np.array([*self.data.xpos[b], yaw_of(self.data.xmat[b])])
 
     def object_speed(self, name: str) -> float:
         """Linear speed of an object's body [m/s]."""
