@@ -21,6 +21,7 @@ from smccli.errors import SmcError
 
 if TYPE_CHECKING:
     from smccli.execute.episode import EpisodeResult
+    from smccli.execute.teach import TeachConfig
     from smccli.learn.tree import Tree as LearnedTree
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -485,8 +486,7 @@ def replay(
     ] = 1.0,
 ) -> None:
     """Execute the tree autonomously in simulation: one episode or a campaign."""
-    from smccli.execute import run_campaign, run_episode
-    from smccli.execute.teach import TeachConfig
+    from smccli.execute import run_episode
     from smccli.execute.verify import verify_log
     from smccli.world.sim import OdometryDrift
 
@@ -497,59 +497,28 @@ def replay(
         raise typer.Exit(0)
     if tree is None:
         raise SmcError("replay needs a tree file (or --verify LOG)")
-    teach_cfg = None
-    if teach is not None:
-        if trials > 0:
-            raise SmcError("--teach continues one episode; it does not go with --trials")
-        next_line = [1.0]
-
-        def teach_status(s) -> None:
-            # A plain line per simulated second of teaching (the viewer's HUD shows it too).
-            if s.t >= next_line[0]:
-                say(f"teaching: sim {s.t:6.2f} s  marks {s.marks}")
-                next_line[0] = s.t + 1.0
-
-        teach_cfg = TeachConfig(
-            tree_path=tree,
-            operator=teach,
-            script=script,
-            on_message=say,
-            on_status=teach_status,
-        )
-    elif script is not None:
+    if teach is not None and trials > 0:
+        raise SmcError("--teach continues one episode; it does not go with --trials")
+    if script is not None and teach is None:
         raise SmcError("--script is the continuation of --teach script")
-    drift = OdometryDrift(odometry_drift, odometry_drift) if odometry_drift > 0 else None
     if cluster is not None and trials <= 0:
         raise SmcError("--cluster runs a campaign's trials: give --trials N")
     if cluster is not None and workers:
         raise SmcError("--workers counts local processes; with --cluster the cluster's run")
-
+    drift = OdometryDrift(odometry_drift, odometry_drift) if odometry_drift > 0 else None
     if trials > 0:
-        with _live(
-            TextColumn("[bold]campaign[/]"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TextColumn("{task.description}"),
-            TimeElapsedColumn(),
-        ) as progress:
-            task = progress.add_task("", total=trials)
-
-            def on_trial(done: int, successes: int) -> None:
-                progress.update(task, completed=done, description=f"{successes}/{done} succeeded")
-
-            summary = run_campaign(
-                tree,
-                scene=scene,
-                trials=trials,
-                seed=seed,
-                workers=workers or (os.cpu_count() or 1),
-                report=report,
-                force=force,
-                on_trial=on_trial,
-                drift=drift,
-                cluster=cluster,
-                speed=speed,
-            )
+        summary = _campaign_with_progress(
+            tree,
+            trials,
+            scene=scene,
+            seed=seed,
+            workers=workers or (os.cpu_count() or 1),
+            report=report,
+            force=force,
+            drift=drift,
+            cluster=cluster,
+            speed=speed,
+        )
         _print_campaign(summary)
         if min_success is not None and summary["success_rate"] < min_success:
             say(f"success rate {summary['success_rate']:.3f} below --min-success {min_success}")
@@ -564,12 +533,48 @@ def replay(
         report=report,
         force=force,
         drift=drift,
-        teach=teach_cfg,
+        teach=None if teach is None else _teach_config(tree, teach, script),
         speed=speed,
     )
     _print_episode(result)
     if result.outcome != "success":
         raise typer.Exit(1)
+
+
+def _campaign_with_progress(tree: Path, trials: int, **options: Any) -> dict[str, Any]:
+    """:func:`~smccli.execute.run_campaign` with a progress bar on a terminal."""
+    from smccli.execute import run_campaign
+
+    with _live(
+        TextColumn("[bold]campaign[/]"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.description}"),
+        TimeElapsedColumn(),
+    ) as progress:
+        task = progress.add_task("", total=trials)
+
+        def on_trial(done: int, successes: int) -> None:
+            progress.update(task, completed=done, description=f"{successes}/{done} succeeded")
+
+        return run_campaign(tree, trials=trials, on_trial=on_trial, **options)
+
+
+def _teach_config(tree: Path, operator: str, script: Path | None) -> TeachConfig:
+    """Teaching where no SMC is contingent (``replay --teach``): the operator's messages
+    and a plain line per simulated second on stderr (the viewer's HUD shows it too)."""
+    from smccli.execute.teach import TeachConfig
+
+    next_line = [1.0]
+
+    def teach_status(s: Any) -> None:
+        if s.t >= next_line[0]:
+            say(f"teaching: sim {s.t:6.2f} s  marks {s.marks}")
+            next_line[0] = s.t + 1.0
+
+    return TeachConfig(
+        tree_path=tree, operator=operator, script=script, on_message=say, on_status=teach_status
+    )
 
 
 @app.command()

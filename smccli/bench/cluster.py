@@ -19,7 +19,7 @@ import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
-from smccli.bench.meta import machine, write_rows  # noqa: E402
+from smccli.bench.meta import campaign_row, machine, write_rows  # noqa: E402
 from smccli.bench.paper import REPO  # noqa: E402
 from smccli.bench.throughput import bench_pick_tree, outcomes  # noqa: E402
 from smccli.execute.campaign import run_campaign  # noqa: E402
@@ -62,16 +62,7 @@ def main(argv: list[str] | None = None) -> int:
                 if outcomes(s) != reference:
                     print(f"{runner} x {n}: outcomes differ from the first run", file=sys.stderr)
                     return 1
-                rows.append(
-                    {
-                        "runner": runner,
-                        "workers": n,
-                        "trials": args.trials,
-                        "successes": s["successes"],
-                        "wall_s": s["wall_s"],
-                        "trials_per_second": s["trials_per_second"],
-                    }
-                )
+                rows.append(campaign_row(s, runner=runner, workers=n))
                 print(
                     f"{runner:9s} {n} workers: {s['successes']}/{args.trials}, "
                     f"{s['wall_s']:.1f} s, {s['trials_per_second']:.2f} trials/s",

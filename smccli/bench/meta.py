@@ -60,3 +60,21 @@ def write_rows(
     args = sys.argv[1:] if argv is None else argv
     result = {"machine": meta, "command": " ".join(["python -m", module, *args]), **fields}
     write_atomic(out, json.dumps({**result, "rows": rows}, indent=1) + "\n")
+
+
+def campaign_row(summary: dict[str, Any], **fields: Any) -> dict[str, Any]:
+    """A benchmark table's row for a campaign ``summary`` (:func:`~smccli.execute.run_campaign`):
+    ``fields`` first, then its trials, successes, wall time and throughput."""
+    keys = ("trials", "successes", "wall_s", "trials_per_second")
+    return {**fields, **{k: summary[k] for k in keys}}
+
+
+def campaign_line(name: str, summary: dict[str, Any]) -> str:
+    """One line for a campaign ``summary``: successes, rate, 95 % interval, failures."""
+    s = summary
+    ci = f" (95 % CI {100 * s['ci95'][0]:.1f}-{100 * s['ci95'][1]:.1f})" if "ci95" in s else ""
+    failures = {k: v for k, v in s["failures"].items() if v}
+    return (
+        f"{name}: {s['successes']}/{s['trials']} = {100 * s['success_rate']:.1f} %{ci}, "
+        f"failures {failures}"
+    )

@@ -38,7 +38,7 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from smccli.bench.meta import machine  # noqa: E402
+from smccli.bench.meta import campaign_line, machine  # noqa: E402
 from smccli.execute import campaign as cp  # noqa: E402
 from smccli.execute.episode import layout_for, resolve  # noqa: E402
 from smccli.execute.executor import EdgeStack, TreeExecutor, match_edges  # noqa: E402
@@ -453,11 +453,7 @@ def main(argv: list[str] | None = None) -> int:
     for scene_name in (*VARIANTS, "bench_pick_panda", "pick_place", "weigh_sort"):
         if scene_name in results:
             s = results[scene_name]
-            print(
-                f"{scene_name} ({s.get('profile', 'ideal')}): {s['successes']}/{s['trials']} = "
-                f"{100 * s['success_rate']:.1f} %, failures "
-                f"{ {k: v for k, v in s['failures'].items() if v} }"
-            )
+            print(campaign_line(f"{scene_name} ({s.get('profile', 'ideal')})", s))
     print(f"wrote {results_file}")
     return 0
 

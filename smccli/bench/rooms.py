@@ -27,7 +27,7 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from smccli.bench.meta import machine  # noqa: E402
+from smccli.bench.meta import campaign_line, machine  # noqa: E402
 from smccli.bench.paper import REPO, _progress, _strip, demo_tree  # noqa: E402
 from smccli.execute import campaign as cp  # noqa: E402
 from smccli.execute.episode import episode, layout_for, resolve  # noqa: E402
@@ -157,12 +157,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"tree: {results['tree']}")
     for name in ("rooms", "rooms_drift"):
         if name in results:
-            s = results[name]
-            print(
-                f"{name}: {s['successes']}/{s['trials']} = {100 * s['success_rate']:.1f} % "
-                f"(95 % CI {100 * s['ci95'][0]:.1f}-{100 * s['ci95'][1]:.1f}), failures "
-                f"{ {k: v for k, v in s['failures'].items() if v} }"
-            )
+            print(campaign_line(name, results[name]))
     print(
         f"decision latency (serial, {lat['decisions']} decisions): total p50 "
         f"{lat['total']['p50']:.1f} / p95 {lat['total']['p95']:.1f} ms; render + histogram "

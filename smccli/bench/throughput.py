@@ -29,7 +29,7 @@ from contextlib import contextmanager  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
-from smccli.bench.meta import machine, write_rows  # noqa: E402
+from smccli.bench.meta import campaign_row, machine, write_rows  # noqa: E402
 from smccli.bench.paper import REPO  # noqa: E402
 from smccli.execute.campaign import run_campaign  # noqa: E402
 from smccli.learn.compile import compile_logs  # noqa: E402
@@ -80,12 +80,8 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{n} workers: outcomes differ from the first run", file=sys.stderr)
                 return 1
             rows.append(
-                {
-                    "workers": n,
-                    "trials": args.trials,
-                    "successes": s["successes"],
-                    "wall_s": s["wall_s"],
-                    "trials_per_second": s["trials_per_second"],
+                campaign_row(s, workers=n)
+                | {
                     "trials_per_second_per_worker": s["trials_per_second"] / n,
                     "cpu_s": cpu,
                     "trials_per_cpu_second": args.trials / cpu,

@@ -127,15 +127,9 @@ def log_log(
     # manipulator's hand in the world (its base's path is drawn by log_base).
     world = hand_track(log)
     if len(log.poi_t):
-        rec.log(
-            "/world/poi/path",
-            rr.LineStrips3D(
-                [world[:, :3]],
-                colors=[PATH_RGB],
-                radii=0.004 if mobile is None else 0.015,
-            ),
-            static=True,
-        )
+        radius = 0.004 if mobile is None else 0.015
+        path = rr.LineStrips3D([world[:, :3]], colors=[PATH_RGB], radii=radius)
+        rec.log("/world/poi/path", path, static=True)
         n = len(log.poi_t)
         times = [tcol(TIMELINE, duration=log.poi_t)]
         rec.send_columns(
@@ -334,15 +328,10 @@ def _log_decisions(
             goal=goal,
             duration=float(d.get("duration") or edge.smc.action.dmp.duration),
         )
-        rec.log(
-            "/world/decisions/planned",
-            rr.LineStrips3D(
-                [y[:, :3]],
-                colors=[colour],
-                radii=0.006 if mobile is None else 0.02,
-                labels=[f"{chosen} planned"],
-            ),
-        )
+        radius = 0.006 if mobile is None else 0.02
+        label = f"{chosen} planned"
+        planned = rr.LineStrips3D([y[:, :3]], colors=[colour], radii=radius, labels=[label])
+        rec.log("/world/decisions/planned", planned)
 
 
 def _log_perception(

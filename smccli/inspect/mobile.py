@@ -197,26 +197,19 @@ def log_stored_scan(rec: rr.RecordingStream, edge: Edge, colour: Rgb, mobile: Mo
             rr.Points3D(pts, colors=[colour], radii=0.012, labels=[f"{edge.id} scan"]),
             static=True,
         )
+        arrows = pose_arrows(pose, mobile.lidar_z)
+        label = f"{edge.id} scan taken here"
         rec.log(
             f"{base}/scan_pose",
-            rr.Arrows3D(
-                **pose_arrows(pose, mobile.lidar_z),
-                colors=[colour],
-                radii=0.015,
-                labels=[f"{edge.id} scan taken here"],
-            ),
+            rr.Arrows3D(**arrows, colors=[colour], radii=0.015, labels=[label]),
             static=True,
         )
     goal = goal_pose_world(edge)
     if goal is not None:
+        label = f"{edge.id} goal ({edge.smc.action.goal_frame} frame)"
         rec.log(
             f"{base}/goal_pose",
-            rr.Arrows3D(
-                **pose_arrows(goal, 0.02),
-                colors=[colour],
-                radii=0.025,
-                labels=[f"{edge.id} goal ({edge.smc.action.goal_frame} frame)"],
-            ),
+            rr.Arrows3D(**pose_arrows(goal, 0.02), colors=[colour], radii=0.025, labels=[label]),
             static=True,
         )
 

@@ -20,11 +20,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from enum import Enum
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from smccli.errors import LogError
 from smccli.learn.trim import IdleParams, idle_centres, trim_interval
 from smccli.world.sensors import PoiCommand
+
+if TYPE_CHECKING:
+    from smccli.logs.log import Log
 
 
 class SegmentMode(str, Enum):
@@ -310,3 +315,14 @@ def trace_from_commands(
         t_end=float(t_end),
         base=np.array(bases, dtype=float).reshape(-1, 3) if has_base else np.zeros((0, 3)),
     )
+
+
+def fragment_commands(log: Log, frag: Fragment) -> list[PoiCommand]:
+    """The operator's commands within ``frag``; LogError when fewer than 3 (no DMP fits)."""
+    cmds = [c for c in log.commands if frag.t0 - 1e-6 <= c.t <= frag.t1 + 1e-6]
+    if len(cmds) < 3:
+        raise LogError(
+            f"{log.path.name}: fragment {frag.t0:.2f}-{frag.t1:.2f} s holds fewer than 3 "
+            "operator commands"
+        )
+    return cmds

@@ -129,6 +129,20 @@ class Log:
     """With ``read_log(..., lazy_frames=True)``: the camera frames, each decoded when asked
     for (``frames`` is then empty); None otherwise."""
 
+    def frame_at(self, t: float) -> CameraFrame | None:
+        """First camera frame at or after ``t`` (within 0.2 s), else the last one before. Of a
+        log read with ``lazy_frames`` only that frame is decoded."""
+        times = self.camera.times if self.camera is not None else [f.t for f in self.frames]
+        after = [i for i, ti in enumerate(times) if ti >= t - 1e-6]
+        if after and times[after[0]] - t <= 0.2:
+            i: int | None = after[0]
+        else:
+            before = [i for i, ti in enumerate(times) if ti < t]
+            i = before[-1] if before else (after[0] if after else None)
+        if i is None:
+            return None
+        return self.camera.frame(i) if self.camera is not None else self.frames[i]
+
     @property
     def interrupted(self) -> bool:
         """Whether the recording stopped before its operator finished (signal, repair)."""
