@@ -16,30 +16,24 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import argparse  # noqa: E402
 import sys  # noqa: E402
-from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
-from smccli.bench.meta import campaign_row, machine, write_rows  # noqa: E402
+from smccli.bench.meta import campaign_line, campaign_row, machine, write_rows  # noqa: E402
 from smccli.bench.paper import REPO  # noqa: E402
-from smccli.bench.throughput import bench_pick_tree, outcomes  # noqa: E402
+from smccli.bench.throughput import Agreement, bench_pick_tree, parse_campaign_args  # noqa: E402
 from smccli.execute.campaign import run_campaign  # noqa: E402
-from smccli.outputs import check_output  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--trials", type=int, default=40)
-    ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--max-workers", type=int, default=os.cpu_count() or 1)
-    ap.add_argument("--out", type=Path, default=REPO / "docs" / "bench_cluster.json")
-    args = ap.parse_args(argv)
-    check_output(args.out, force=True)
+    args = parse_campaign_args(ap, argv, 40, REPO / "docs" / "bench_cluster.json")
     meta = machine()
     from distributed import LocalCluster
 
     with bench_pick_tree() as tree:
         rows: list[dict[str, Any]] = []
-        reference: list[tuple[int, str]] | None = None
+        agreement = Agreement()
         for n in range(1, args.max_workers + 1):
             for runner in ("processes", "dask"):
                 if runner == "processes":
@@ -58,19 +52,13 @@ def main(argv: list[str] | None = None) -> int:
                             seed=args.seed,
                             cluster=cluster.scheduler_address,
                         )
-                reference = reference or outcomes(s)
-                if outcomes(s) != reference:
+                if agreement.differs(s):
                     print(f"{runner} x {n}: outcomes differ from the first run", file=sys.stderr)
                     return 1
                 rows.append(campaign_row(s, runner=runner, workers=n))
-                print(
-                    f"{runner:9s} {n} workers: {s['successes']}/{args.trials}, "
-                    f"{s['wall_s']:.1f} s, {s['trials_per_second']:.2f} trials/s",
-                    flush=True,
-                )
-    write_rows(
-        args.out, "smccli.bench.cluster", argv, meta, rows, scene="bench_pick", seed=args.seed
-    )
+                rate = f"{s['wall_s']:.1f} s, {s['trials_per_second']:.2f} trials/s"
+                print(f"{runner:9s} {n} workers: {campaign_line('bench_pick', s)}; {rate}")
+    write_rows(args.out, __spec__.name, argv, meta, rows, scene="bench_pick", seed=args.seed)
     print(f"wrote {args.out}")
     return 0
 

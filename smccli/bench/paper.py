@@ -289,18 +289,20 @@ VARIANTS = ("bench_pick_realistic", "bench_pick_clutter", "bench_pick_moving")
 VARIANT_DIR = Path(__file__).resolve().parent / "scenes"
 
 
-def _progress(name: str, total: int):
+def campaign(name: str, tree: Path, trials: int, **options: Any) -> dict[str, Any]:
+    """:func:`~smccli.execute.run_campaign` of ``trials`` on ``tree``, its progress on
+    stderr every 25 trials as ``name``; ``options`` are run_campaign's (seed, workers, ...)."""
     t0 = time.perf_counter()
 
     def on_trial(done: int, ok: int) -> None:
-        if done % 25 == 0 or done == total:
+        if done % 25 == 0 or done == trials:
             rate = done / (time.perf_counter() - t0)
-            _log(f"{name}: {done}/{total} trials, {ok} succeeded, {rate:.2f} trials/s")
+            _log(f"{name}: {done}/{trials} trials, {ok} succeeded, {rate:.2f} trials/s")
 
-    return on_trial
+    return cp.run_campaign(tree, trials=trials, on_trial=on_trial, **options)
 
 
-def _strip(summary: dict[str, Any]) -> dict[str, Any]:
+def strip_trials(summary: dict[str, Any]) -> dict[str, Any]:
     """The summary without per-trial arrays that bloat the JSON (kept: outcome and distance)."""
     s = dict(summary)
     s["trial_results"] = [
@@ -362,19 +364,13 @@ def main(argv: list[str] | None = None) -> int:
     results["match_1000_edges"] = match_1000(tree, scene)
     _log(f"latency {results['latency_serial_ms']}, match {results['match_1000_edges']}")
 
-    summary = cp.run_campaign(
-        tree_path,
-        trials=args.trials,
-        seed=args.seed,
-        workers=args.workers,
-        on_trial=_progress("bench_pick", args.trials),
-    )
+    summary = campaign("bench_pick", tree_path, args.trials, seed=args.seed, workers=args.workers)
     summary["profile"] = scene.noise.profile
     results["figures"] = [
         *plots(summary, args.out / "img"),
         fig10(summary, args.out / "img", "bench"),
     ]
-    results["bench_pick"] = _strip(summary)
+    results["bench_pick"] = strip_trials(summary)
     results_file = args.out / "bench_results.json"
 
     def save() -> None:
@@ -391,32 +387,27 @@ def main(argv: list[str] | None = None) -> int:
     }
     save()
 
-    def campaign(scene_name: str, trials: int) -> dict[str, Any]:
+    def demo_campaign(scene_name: str, trials: int) -> dict[str, Any]:
         _log(f"compiling {scene_name}'s demonstrations")
-        return cp.run_campaign(
-            demo_tree(scene_name, args.work),
-            trials=trials,
-            seed=args.seed,
-            workers=args.workers,
-            on_trial=_progress(scene_name, trials),
-        )
+        tree = demo_tree(scene_name, args.work)
+        return campaign(scene_name, tree, trials, seed=args.seed, workers=args.workers)
 
     noisy_tree = noisy_demo_tree(args.work) if args.variant_trials > 0 else Path()
     for variant in VARIANTS if args.variant_trials > 0 else ():
         scene_file = VARIANT_DIR / variant / "scene.yaml"
         _log(f"{variant}: the tree of the realistic demonstration in {scene_file}")
-        s = cp.run_campaign(
+        s = campaign(
+            variant,
             noisy_tree,
+            args.variant_trials,
             scene=scene_file,
-            trials=args.variant_trials,
             seed=args.seed,
             workers=args.workers,
-            on_trial=_progress(variant, args.variant_trials),
         )
         s["profile"] = resolve(noisy_tree, scene_file)[1].noise.profile
         results["figures"] += plots(s, args.out / "img", variant)
         results["figures"].append(fig10(s, args.out / "img", variant))
-        results[variant] = _strip(s)
+        results[variant] = strip_trials(s)
         vb = [b for b in s["by_band"] if b["trials"]]
         results["targets"][f"{variant}>=0.99"] = s["success_rate"] >= 0.99
         results["targets"][f"{variant}_every_band>=0.97"] = all(
@@ -429,11 +420,11 @@ def main(argv: list[str] | None = None) -> int:
     for scene_name, trials in others:
         if trials <= 0:
             continue
-        s = campaign(scene_name, trials)
+        s = demo_campaign(scene_name, trials)
         s["profile"] = load_scene(scene_name).noise.profile
         if scene_name == "bench_pick_panda":
             results["figures"] += plots(s, args.out / "img", "bench_panda")
-        results[scene_name] = _strip(s)
+        results[scene_name] = strip_trials(s)
         results["targets"][f"{scene_name}>=0.99"] = s["success_rate"] >= 0.99
         save()
     results["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S")

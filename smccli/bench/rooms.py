@@ -28,8 +28,7 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 
 from smccli.bench.meta import campaign_line, machine  # noqa: E402
-from smccli.bench.paper import REPO, _progress, _strip, demo_tree  # noqa: E402
-from smccli.execute import campaign as cp  # noqa: E402
+from smccli.bench.paper import REPO, campaign, demo_tree, strip_trials  # noqa: E402
 from smccli.execute.episode import episode, layout_for, resolve  # noqa: E402
 from smccli.learn.tree import ROOT  # noqa: E402
 from smccli.outputs import check_output, write_atomic  # noqa: E402
@@ -130,25 +129,19 @@ def main(argv: list[str] | None = None) -> int:
         "tree": tree_shape(tree),
     }
     results["latency_serial_ms"] = serial_latency(tree, scene, args.latency_episodes, args.seed)
-    plain = cp.run_campaign(
-        tree_path,
-        trials=args.trials,
-        seed=args.seed,
-        workers=args.workers,
-        on_trial=_progress("rooms", args.trials),
-    )
-    results["rooms"] = _strip(plain)
+    plain = campaign("rooms", tree_path, args.trials, seed=args.seed, workers=args.workers)
+    results["rooms"] = strip_trials(plain)
     drifted = None
     if args.drift_trials > 0:
-        drifted = cp.run_campaign(
+        drifted = campaign(
+            "rooms with drift",
             tree_path,
-            trials=args.drift_trials,
+            args.drift_trials,
             seed=args.seed + 1,
             workers=args.workers,
-            on_trial=_progress("rooms with drift", args.drift_trials),
             drift=OdometryDrift(args.drift, args.drift),
         )
-        results["rooms_drift"] = _strip(drifted)
+        results["rooms_drift"] = strip_trials(drifted)
     results["figure"] = plot(plain, drifted, args.out / "img")
     results["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S")
     path = args.out / "bench_rooms.json"

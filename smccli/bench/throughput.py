@@ -52,31 +52,48 @@ def bench_pick_tree() -> Iterator[Path]:
         yield tree
 
 
-def outcomes(summary: dict[str, Any]) -> list[tuple[int, str]]:
-    """(trial index, outcome) of a campaign summary: runs with other workers must agree."""
-    return [(r["index"], r["outcome"]) for r in summary["trial_results"]]
+def parse_campaign_args(
+    ap: argparse.ArgumentParser, argv: list[str] | None, trials: int, out: Path
+) -> argparse.Namespace:
+    """``ap`` with the options of every bench_pick campaign benchmark (``--trials``,
+    ``--seed``, ``--out``) parsed from ``argv``; the output file checked."""
+    ap.add_argument("--trials", type=int, default=trials)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=out)
+    args = ap.parse_args(argv)
+    check_output(args.out, force=True)
+    return args
+
+
+class Agreement:
+    """Runs of one campaign with other workers must give the same trials: each run's
+    (trial index, outcome) pairs against the first run's."""
+
+    def __init__(self) -> None:
+        self.first: list[tuple[int, str]] | None = None
+
+    def differs(self, summary: dict[str, Any]) -> bool:
+        """Whether ``summary``'s trials differ from the first run's (the first: never)."""
+        got = [(r["index"], r["outcome"]) for r in summary["trial_results"]]
+        self.first = self.first or got
+        return got != self.first
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--trials", type=int, default=200)
-    ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
-    ap.add_argument("--out", type=Path, default=REPO / "docs" / "bench_throughput.json")
-    args = ap.parse_args(argv)
-    check_output(args.out, force=True)
+    args = parse_campaign_args(ap, argv, 200, REPO / "docs" / "bench_throughput.json")
     meta = machine()
     with bench_pick_tree() as tree:
         rows: list[dict[str, Any]] = []
-        reference: list[tuple[int, str]] | None = None
+        agreement = Agreement()
         for n in args.workers:
             load = os.getloadavg()[0]
             cpu0 = _cpu_s()
             s = run_campaign(tree, trials=args.trials, seed=args.seed, workers=n)
             cpu = _cpu_s() - cpu0
             trial_s = float(statistics.median(r["wall_time"] for r in s["trial_results"]))
-            reference = reference or outcomes(s)
-            if outcomes(s) != reference:
+            if agreement.differs(s):
                 print(f"{n} workers: outcomes differ from the first run", file=sys.stderr)
                 return 1
             rows.append(
@@ -98,9 +115,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"load before {load:.1f}",
                 flush=True,
             )
-    write_rows(
-        args.out, "smccli.bench.throughput", argv, meta, rows, scene="bench_pick", seed=args.seed
-    )
+    write_rows(args.out, __spec__.name, argv, meta, rows, scene="bench_pick", seed=args.seed)
     print(f"wrote {args.out}")
     return 0
 
