@@ -38,11 +38,11 @@ def wrap(angle: float, period: float = TWO_PI) -> float:
     """``angle`` wrapped into (-period/2, period/2] [rad]; ``period`` pi wraps an axis
     (a direction defined modulo pi).
 
-    ``(angle + period/2) % period - period/2``: the sum rounds once, so an angle in range
-    moves by at most half an ulp of the period (4.4e-16 rad for 2 pi). It is the form compile has
-    always used, so trees keep their bits. ``math.remainder`` would be exact; measured, it
-    moves the last bit of 1.7 % of in-range angles against this form and with them 53
-    values of the bench_pick tree. ``atan2(sin a, cos a)`` moves 3 % of in-range angles."""
+    ``(angle + period/2) % period - period/2``: the sum rounds, so an angle in range may
+    move by up to half an ulp of the period (4.4e-16 rad for 2 pi; measured on 200,000
+    angles with full mantissas: half of them move). It is the form compile has always
+    used, so trees keep their bits; ``math.remainder`` would be exact but moves 53 values
+    of the bench_pick tree by an ulp (docs/choices.md, "One geometry")."""
     half = period / 2
     r = (angle + half) % period - half
     return half if r == -half else r
