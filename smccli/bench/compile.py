@@ -47,7 +47,11 @@ logs = [Path(p) for p in sys.argv[3:]]
 t0 = time.perf_counter()
 r = compile_logs(logs, Path(sys.argv[1]), rebuild=True, workers=workers)
 dt = time.perf_counter() - t0
-rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+# VmHWM, not ru_maxrss: Linux carries ru_maxrss over execve, so a child started by a big
+# parent (one that has just recorded the demos) reported the parent's peak (429 MB).
+hwm = [ln for ln in open("/proc/self/status") if ln.startswith("VmHWM:")]
+kb = int(hwm[0].split()[1]) if hwm else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+rss_mb = kb / 1024
 print(json.dumps({"seconds": dt, "with_imports_s": time.perf_counter() - t_start,
                   "peak_rss_mb": rss_mb, "nodes": len(r.tree.nodes), "edges": len(r.tree.edges)}))
 """
