@@ -22,8 +22,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering unless told othe
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from smccli.world.objects import add_object  # noqa: E402
 from smccli.world.scene import ObjectSpec as SceneObject  # noqa: E402
-from smccli.world.scene import _add_object  # noqa: E402
 from smccli.world.sensors import CameraFrame, RobotGeometry  # noqa: E402
 
 TABLE_TOP = 0.75
@@ -108,7 +108,7 @@ BUILT: tuple[SceneObject, ...] = (
     _built("grey_bin", "open_box", (0.18, 0.18, 0.08), GREY),
     _built("scale", "scale", (0.14, 0.14, 0.04), (0.7, 0.7, 0.72, 1.0)),
 )
-"""Objects built by :mod:`smccli.world.scene` itself (``_add_object``, the geometry of the
+"""Objects built by :mod:`smccli.world.objects` itself (``add_object``, the geometry of the
 built-in scenes): the mug, the stepped pyramid, the bins, the scale. They have free joints
 and are placed through ``qpos``; they are not part of :data:`OBJECTS`, so the separability
 figures keep their meaning."""
@@ -177,7 +177,7 @@ class PerceptionScene:
     def __init__(self) -> None:
         spec = mujoco.MjSpec.from_string(scene_xml())
         for obj in BUILT:
-            _add_object(spec, obj)
+            add_object(spec, obj)
         self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
         self.renderer = mujoco.Renderer(self.model, height=HEIGHT, width=WIDTH)

@@ -14,7 +14,7 @@ from conftest import smc
 from smccli.learn.tree import load_tree
 from smccli.logs import read_log
 from smccli.perception import Scan2D, scan_distance
-from smccli.world.controller import wrap
+from smccli.world.geometry import wrap
 from smccli.world.scene import load_scene
 from smccli.world.sensors import PoiCommand
 from smccli.world.sim import Sim
