@@ -277,7 +277,7 @@ def test_bag_missing_a_topic_or_of_another_type_is_one_line(tmp_path: Path) -> N
         read_ros2_bag(bag, parse_topic_map(data))
     assert "holds sensor_msgs/msg/JointState, expected sensor_msgs/msg/Image or" in str(err.value)
     # A native smc log is no ROS 2 bag.
-    with pytest.raises(LogError, match="expected ROS 2 CDR"):
+    with pytest.raises(LogError, match=r"\(protobuf, not ROS 2\), expected"):
         read_ros2_bag(
             SAMPLE_LOGS / "bench_pick" / "demo.mcap",
             parse_topic_map(

@@ -19,8 +19,9 @@ from __future__ import annotations
 import bisect
 import hashlib
 import io
-from collections.abc import Callable
-from dataclasses import dataclass
+import struct
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -43,11 +44,11 @@ ROLES: dict[str, tuple[str, tuple[str, ...]]] = {
     "poi": (tp.POI, ("geometry_msgs/msg/PoseStamped",)),
     "joint_states": (tp.JOINT_STATES, ("sensor_msgs/msg/JointState",)),
     "color": (tp.COLOR, ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")),
-    "depth": (tp.DEPTH, ("sensor_msgs/msg/Image",)),
+    "depth": (tp.DEPTH, ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")),
     "camera_info": (tp.CALIBRATION, ("sensor_msgs/msg/CameraInfo",)),
     "weight": (tp.WEIGHT, ("std_msgs/msg/Float64",)),
     "lidar": (tp.SCAN, ("sensor_msgs/msg/LaserScan",)),
-    "marks": (tp.SALIENCY, ("std_msgs/msg/String", "std_msgs/msg/Empty")),
+    "marks": (tp.SALIENCY, ("std_msgs/msg/String", "std_msgs/msg/Empty", "sensor_msgs/msg/Joy")),
     "points": (tp.POINTS, ("sensor_msgs/msg/PointCloud2",)),
 }
 """Map role -> (the native topic it stands for, the ROS 2 types it may hold)."""
@@ -70,22 +71,29 @@ class TopicMap:
     """Role (``color``, ``poi``, ...) -> topic."""
     depth_scale: float = 0.001
     """Metres per unit of a 16UC1 depth image."""
+    joints: dict[str, str] = field(default_factory=dict)
+    """A driver's joint name -> the robot file's (``joints`` in the map)."""
+    mark_button: int = 0
+    """The button of a ``sensor_msgs/Joy`` marks topic whose press is a mark."""
 
 
 def parse_topic_map(data: dict[str, Any], path: Path | None = None) -> TopicMap:
     """A map from already schema-valid data (``schemas/topic_map.schema.json``)."""
     topics: dict[str, str] = {}
-    scale = 0.001
+    scale, button = 0.001, 0
     for role, value in data["topics"].items():
         if isinstance(value, dict):
             topics[role] = str(value["topic"])
             scale = float(value.get("scale", scale)) if role == "depth" else scale
+            button = int(value.get("button", button)) if role == "marks" else button
         else:
             topics[role] = str(value)
     scene = str(data["scene"])
     if path is not None and (scene.endswith((".yaml", ".yml")) or "/" in scene):
         scene = str((path.parent / scene).resolve())
-    return TopicMap(path, scene, str(data.get("world_frame", "world")), topics, scale)
+    joints = {str(k): str(v) for k, v in (data.get("joints") or {}).items()}
+    world = str(data.get("world_frame", "world"))
+    return TopicMap(path, scene, world, topics, scale, joints, button)
 
 
 def load_topic_map(path: str | Path) -> TopicMap:
@@ -154,39 +162,46 @@ def _ns(stamp: Any) -> int:
 
 
 def resolve_bag(path: str | Path) -> Path:
-    """The MCAP file of a bag: the path itself, or the one ``.mcap`` in a bag directory as
-    ``ros2 bag record`` writes it (``metadata.yaml`` + ``NAME_0.mcap``). LogError when there
-    is none, or several (a split bag: pass its parts one by one)."""
+    """The file or directory to read a bag from: an MCAP file as it is; a bag directory
+    as ``ros2 bag record`` writes it (``metadata.yaml`` and its storage files): its one
+    ``.mcap`` file when it holds only that (the file is self-contained, and keeps the
+    attachments of ``smc export``), else the directory (rosbag2 split into several files,
+    or sqlite3 storage); a ROS 1 ``.bag``. LogError (one line) for anything else."""
     p = Path(path)
     if p.is_dir():
         parts = sorted(p.glob("*.mcap"))
-        if len(parts) != 1:
-            found = ", ".join(q.name for q in parts) or "none"
-            raise LogError(f"{p}: a bag directory needs exactly one .mcap file, found {found}")
-        return parts[0]
+        if len(parts) == 1 and not list(p.glob("*.db3")):
+            return parts[0]
+        if not (p / "metadata.yaml").is_file():
+            found = ", ".join(q.name for q in sorted(p.iterdir())) or "nothing"
+            raise LogError(f"{p}: a bag directory needs its metadata.yaml (rosbag2), found {found}")
+        return p
     if not p.is_file():
         raise LogError(f"{p}: no such file")
+    if p.suffix == ".db3":
+        raise LogError(f"{p}: one file of a sqlite3 bag: give its directory (with metadata.yaml)")
     return p
 
 
-def read_ros2_bag(
-    path: str | Path,
-    topic_map: TopicMap,
-    *,
-    on_warning: Callable[[str], None] | None = None,
-) -> Log:
-    """Read a ROS 2 bag through ``topic_map`` into a Log (times in seconds of the bag's
-    clock; poses in the map's world frame).
+@dataclass
+class _Source:
+    """A bag opened for reading: its topics and their types, message counts, smc's
+    attachments and metadata (MCAP files only), its digest, and its messages decoded."""
 
-    LogError (one line naming the file, and the topic) for a file that is not a readable
-    MCAP, a bag that is not ROS 2 (its schemas not ``ros2msg``), a mapped topic missing or
-    holding another type, a pose without a transform to the world frame, an image that
-    does not decode.
-    """
-    from smccli.world.scene import load_scene
+    types: dict[str, str]
+    """Topic -> message type (``sensor_msgs/msg/Image``)."""
+    counts: dict[str, int]
+    attachments: dict[str, bytes]
+    metadata: dict[str, dict[str, str]]
+    sha256: str
+    messages: Callable[[list[str]], Iterator[tuple[str, int, Any]]]
+    """Topics -> (topic, log time [ns], decoded message) in log-time order."""
+    close: Callable[[], None] = lambda: None
 
-    path = resolve_bag(path)
-    warn = on_warning or (lambda msg: None)
+
+def _open_mcap(path: Path) -> _Source:
+    """A ROS 2 bag in one MCAP file, decoded from the definitions it stores
+    (``mcap-ros2-support``: it also gives the attachments ``smc export`` writes)."""
     data = path.read_bytes()
     try:
         reader = make_reader(io.BytesIO(data), decoder_factories=[DecoderFactory()])
@@ -197,23 +212,99 @@ def read_ros2_bag(
         raise LogError(f"{path}: not a readable MCAP file ({exc})") from None
     if summary is None or not summary.channels:
         raise LogError(f"{path}: the bag holds no topics")
-    types = {c.topic: summary.schemas[c.schema_id] for c in summary.channels.values()}
+    types = {}
+    for c in summary.channels.values():
+        schema = summary.schemas[c.schema_id]
+        ros2 = schema.encoding == "ros2msg"
+        types[c.topic] = schema.name if ros2 else f"{schema.name} ({schema.encoding}, not ROS 2)"
     counts: dict[str, int] = {}
     stats = summary.statistics
     if stats is not None:
         for cid, n in stats.channel_message_counts.items():
             counts[summary.channels[cid].topic] = n
+
+    def messages(topics: list[str]) -> Iterator[tuple[str, int, Any]]:
+        for _schema, channel, message, decoded in reader.iter_decoded_messages(
+            topics=topics, log_time_order=True
+        ):
+            yield channel.topic, message.log_time, decoded
+
+    sha = hashlib.sha256(data).hexdigest()
+    return _Source(types, counts, attachments, metadata, sha, messages)
+
+
+def _open_rosbags(path: Path) -> _Source:
+    """A rosbag2 directory (sqlite3 or MCAP storage, any number of files) or a ROS 1 bag,
+    read with ``rosbags``: messages decoded from the definitions the bag stores, else
+    (a sqlite3 bag before Iron stores none) from ROS 2 Humble's standard types."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import Connection
+    from rosbags.typesys import Stores, get_typestore
+
+    try:
+        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+        reader.open()
+    except Exception as exc:  # rosbags' own errors name the file's problem
+        raise LogError(f"{path}: not a readable bag ({type(exc).__name__}: {exc})") from None
+    conns: dict[str, list[Connection]] = {}
+    for c in reader.connections:
+        conns.setdefault(c.topic, []).append(c)
+    if not conns:
+        reader.close()
+        raise LogError(f"{path}: the bag holds no topics")
+    types = {t: cs[0].msgtype for t, cs in conns.items()}
+    counts = {t: sum(c.msgcount for c in cs) for t, cs in conns.items()}
+    files = [path] if path.is_file() else sorted(q for q in path.iterdir() if q.is_file())
+    h = hashlib.sha256()
+    for f in files:
+        h.update(f.read_bytes())
+
+    def messages(topics: list[str]) -> Iterator[tuple[str, int, Any]]:
+        wanted = [c for t in topics for c in conns.get(t, [])]
+        for conn, t_ns, raw in reader.messages(connections=wanted):
+            try:
+                msg = reader.deserialize(raw, conn.msgtype)
+            except Exception as exc:  # a message its definition does not fit
+                raise ValueError(f"{conn.topic}: {type(exc).__name__}: {exc}") from None
+            yield conn.topic, t_ns, msg
+
+    return _Source(types, counts, {}, {}, h.hexdigest(), messages, reader.close)
+
+
+def read_ros2_bag(
+    path: str | Path,
+    topic_map: TopicMap,
+    *,
+    on_warning: Callable[[str], None] | None = None,
+) -> Log:
+    """Read a bag through ``topic_map`` into a Log (times in seconds of the bag's clock;
+    poses in the map's world frame): a ROS 2 bag in MCAP, a rosbag2 directory (sqlite3 or
+    MCAP, split or not) or a ROS 1 bag.
+
+    LogError (one line naming the file, and the topic) for a file that is not a readable
+    bag, a mapped topic missing or holding another type, a pose without a transform to the
+    world frame, an image that does not decode.
+    """
+    path = resolve_bag(path)
+    src = _open_rosbags(path) if path.is_dir() or path.suffix == ".bag" else _open_mcap(path)
+    try:
+        return _read(path, src, topic_map, on_warning or (lambda msg: None))
+    finally:
+        src.close()
+
+
+def _read(path: Path, src: _Source, topic_map: TopicMap, warn: Callable[[str], None]) -> Log:
+    from smccli.world.scene import load_scene
+
+    types, counts, attachments, metadata = src.types, src.counts, src.attachments, src.metadata
     for role, topic in topic_map.topics.items():
         where = f"{path}: topic {topic} (the map's {role})"
         if topic not in types or counts.get(topic, 1) == 0:
             have = ", ".join(sorted(types)) or "none"
             raise LogError(f"{where} missing (topics in the bag: {have})")
-        schema = types[topic]
         expected = ROLES[role][1]
-        if schema.encoding != "ros2msg":
-            raise LogError(f"{where} holds {schema.encoding} {schema.name}, expected ROS 2 CDR")
-        if schema.name not in expected:
-            raise LogError(f"{where} holds {schema.name}, expected {' or '.join(expected)}")
+        if types[topic] not in expected:
+            raise LogError(f"{where} holds {types[topic]}, expected {' or '.join(expected)}")
 
     scene = load_scene(topic_map.scene)
     if "scene.yaml" not in attachments or "scene.xml" not in attachments:
@@ -232,19 +323,18 @@ def read_ros2_bag(
     b = _Builder(path, topic_map, scene.robot, warn)
     wanted = [*topic_map.topics.values(), *(t for t in TF_TOPICS if t in types)]
     try:
-        for _schema, channel, message, decoded in reader.iter_decoded_messages(
-            topics=wanted, log_time_order=True
-        ):
-            b.add(channel.topic, message.log_time, decoded)
+        for topic, t_ns, decoded in src.messages(wanted):
+            b.add(topic, t_ns, decoded)
     except (McapError, ValueError, EOFError) as exc:
         raise LogError(f"{path}: a message does not decode ({exc})") from None
+    b.merge_joints()
     native_counts = {ROLES[r][0]: counts.get(t, 0) for r, t in topic_map.topics.items()}
     if "command" not in topic_map.topics:
         native_counts[tp.COMMAND] = len(b.poi)  # the measured POI is the demonstrated path
     native_counts[tp.TF] = sum(counts.get(t, 0) for t in TF_TOPICS)
     return Log(
         path=path,
-        sha256=hashlib.sha256(data).hexdigest(),
+        sha256=src.sha256,
         metadata={str(k): str(v) for k, v in meta.items()},
         attachments=attachments,
         commands=b.commands(),
@@ -274,7 +364,10 @@ class _Builder:
         self.tf = _TfBuffer(m.world_frame)
         self.targets: list[tuple[float, np.ndarray]] = []
         self.grip: list[tuple[float, float]] = []
+        self.joint_msgs: list[tuple[float, tuple[str, ...], np.ndarray, np.ndarray, np.ndarray]]
+        self.joint_msgs = []  # (t, names, position, velocity, effort) of each message
         self.joints: list[JointState] = []
+        self.buttons_down = False
         self.poi_t: list[float] = []
         self.poi: list[np.ndarray] = []
         self.color: list[tuple[int, str, Any]] = []
@@ -303,27 +396,34 @@ class _Builder:
             self.grip.append((t, float(msg.data)))
         elif role == "joint_states":
             n = len(msg.name)
-            zeros = np.zeros(n)
-            self.joints.append(
-                JointState(
-                    t=t,
-                    names=tuple(msg.name),
-                    position=np.array(msg.position, dtype=float),
-                    velocity=np.array(msg.velocity, dtype=float) if msg.velocity else zeros,
-                    effort=np.array(msg.effort, dtype=float) if msg.effort else zeros,
-                )
+            names = tuple(self.map.joints.get(str(j), str(j)) for j in msg.name)
+
+            def column(values: Any) -> np.ndarray:  # velocity and effort may be left empty
+                return np.array(values, dtype=float) if len(values) == n else np.zeros(n)
+
+            self.joint_msgs.append(
+                (t, names, column(msg.position), column(msg.velocity), column(msg.effort))
             )
         elif role == "color":
             self.color.append((_ns(msg.header.stamp), msg.header.frame_id, msg))
         elif role == "depth":
             self.depth.append((_ns(msg.header.stamp), msg))
         elif role == "camera_info":
-            self.info.append((_ns(msg.header.stamp), np.array(msg.k, dtype=float).reshape(3, 3)))
+            k = msg.k if hasattr(msg, "k") else msg.K  # ROS 1 names it K
+            self.info.append((_ns(msg.header.stamp), np.array(k, dtype=float).reshape(3, 3)))
         elif role == "weight":
             self.weight_t.append(t)
             self.weight.append(float(msg.data))
         elif role == "marks":
-            self.marks.append(SaliencyMark(t=t, source="operator", label=getattr(msg, "data", "")))
+            if hasattr(msg, "buttons"):  # a joystick: a press (rising edge) is a mark
+                i = self.map.mark_button
+                down = i < len(msg.buttons) and bool(msg.buttons[i])
+                if down and not self.buttons_down:
+                    self.marks.append(SaliencyMark(t=t, source="operator", label=""))
+                self.buttons_down = down
+            else:
+                label = getattr(msg, "data", "")
+                self.marks.append(SaliencyMark(t=t, source="operator", label=label))
         elif role == "points":
             self.clouds.append(self._cloud(t, msg))
         elif role == "lidar":
@@ -333,6 +433,25 @@ class _Builder:
             self.scans.append(
                 Scan(t, float(msg.angle_min), float(end), ranges, msg.header.frame_id)
             )
+
+    def merge_joints(self) -> None:
+        """Joint states from every publisher on the topic (an arm's driver and a separate
+        gripper's, say) merged by joint name: from the first time every joint has been
+        heard, each message gives the state of all of them, the others at their latest
+        values. One publisher's states come out as they went in."""
+        order: dict[str, int] = {}
+        for _, names, *_ in self.joint_msgs:
+            for n in names:
+                order.setdefault(n, len(order))
+        k = len(order)
+        pos, vel, eff = np.zeros(k), np.zeros(k), np.zeros(k)
+        heard = np.zeros(k, dtype=bool)
+        all_names = tuple(order)
+        for t, names, p, v, e in self.joint_msgs:
+            idx = [order[n] for n in names]
+            pos[idx], vel[idx], eff[idx], heard[idx] = p, v, e, True
+            if heard.all():
+                self.joints.append(JointState(t, all_names, pos.copy(), vel.copy(), eff.copy()))
 
     def _world(self, topic: str, header: Any) -> np.ndarray:
         """T_world_frame of a message's ``header`` (frame and stamp); LogError without a
@@ -455,6 +574,16 @@ class _Builder:
 
     def _depth(self, msg: Any, shape: tuple[int, ...]) -> np.ndarray:
         topic = self.map.topics["depth"]
+        if hasattr(msg, "format"):  # CompressedImage
+            depth = compressed_depth(bytes(msg.data), msg.format, self.map.depth_scale)
+            if isinstance(depth, str):
+                raise LogError(f"{self.path}: {topic}: {depth}")
+            if depth.shape != shape:
+                raise LogError(
+                    f"{self.path}: {topic}: depth {depth.shape[1]}x{depth.shape[0]} differs "
+                    f"from the colour image's {shape[1]}x{shape[0]}"
+                )
+            return depth
         enc = msg.encoding.upper()
         if enc == "16UC1":
             img = _rows(msg, 1, np.dtype("<u2") if not msg.is_bigendian else np.dtype(">u2"))
@@ -475,6 +604,45 @@ class _Builder:
                 f"image's {shape[1]}x{shape[0]}"
             )
         return depth
+
+
+COMPRESSED_DEPTH_HEADER = struct.Struct("<iff")
+"""image_transport's compressedDepth header before the PNG: the format (-1 undefined, 0
+inverse depth) and the two quantisation parameters of a 32FC1 image's inverse depth."""
+
+
+def compressed_depth(data: bytes, fmt: str, scale: float) -> np.ndarray | str:
+    """A ``compressedDepth`` CompressedImage (image_transport's plugin, as RealSense users
+    record depth) -> depth [m], float32 (h, w), 0 where there is none; or why it cannot be
+    read (one line). 16UC1 is the PNG's values times ``scale``; 32FC1 is quantised inverse
+    depth: depth = a / (v - b) for v > 0, a and b from the header."""
+    import cv2
+
+    kind = fmt.lower()
+    if "compresseddepth" not in kind:
+        return f"format {fmt!r}: a depth CompressedImage must be compressedDepth (PNG)"
+    if "rvl" in kind:
+        return (
+            f"format {fmt!r}: compressedDepth RVL is not read; record with the plugin's "
+            "format png, or republish the depth raw"
+        )
+    n = COMPRESSED_DEPTH_HEADER.size
+    if len(data) <= n:
+        return f"format {fmt!r}: {len(data)} bytes, no image after the {n}-byte header"
+    _, a, b = COMPRESSED_DEPTH_HEADER.unpack(data[:n])
+    img = cv2.imdecode(np.frombuffer(data[n:], dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None or img.dtype != np.uint16 or img.ndim != 2:
+        return f"format {fmt!r}: the image after the header is not a 16-bit PNG"
+    encoding = fmt.split(";")[0].strip().upper()
+    if encoding == "16UC1":
+        # In float64, then float32, as a raw 16UC1 image (the same values to the bit).
+        return (img.astype(np.float64) * scale).astype(np.float32)
+    if encoding == "32FC1":
+        v = img.astype(np.float32)
+        with np.errstate(divide="ignore"):
+            depth = np.where(v > 0, np.float32(a) / (v - np.float32(b)), 0.0)
+        return np.nan_to_num(depth.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    return f"format {fmt!r}: encoding {encoding!r}, expected 16UC1 or 32FC1"
 
 
 def _rows(msg: Any, channels: int, dtype: Any) -> np.ndarray:

@@ -1,0 +1,388 @@
+"""Bags as labs record them, written by another library (``rosbags``' rosbag1 and rosbag2
+writers, not smc's exporter): a rosbag2 directory in sqlite3 or MCAP, split into several
+files or not, a ROS 1 bag, depth through image_transport's compressedDepth, the gripper's
+joints from a publisher of its own, a driver's joint names, marks from a joystick button.
+Each compiles into the native log's tree; what cannot be read is one line, exit 2."""
+
+from __future__ import annotations
+
+import dataclasses
+import struct
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+from conftest import SAMPLE_LOGS, smc
+from mcap.reader import make_reader
+from rosbags.rosbag1 import Writer as Writer1
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Writer2
+from rosbags.typesys import Stores, get_typestore
+from test_inspect import read_rrd
+from test_ros2_bag import _chain, _world_goal
+
+from smccli.errors import LogError
+from smccli.learn.compile import compile_logs
+from smccli.logs.ros2_bag import parse_topic_map, read_ros2_bag
+from smccli.logs.ros2_export import export_ros2
+from smccli.logs.ros2_msgs import export_map
+
+SCENE = "bench_pick"
+NATIVE = SAMPLE_LOGS / SCENE / "demo.mcap"
+TS = get_typestore(Stores.ROS2_HUMBLE)
+Message = tuple[str, str, int, Any]
+"""(topic, type, log time [ns], message as rosbags' dataclass)."""
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory) -> tuple[list[Message], dict[str, Any]]:
+    """The native demo's messages (through smc's exporter, then decoded by rosbags) and
+    the topic map ``smc export`` writes beside them."""
+    bag = tmp_path_factory.mktemp("export") / "demo.mcap"
+    export_ros2(NATIVE, bag)
+    out: list[Message] = []
+    with bag.open("rb") as f:
+        reader = make_reader(f)
+        for schema, channel, message in reader.iter_messages(log_time_order=True):
+            assert schema is not None
+            msg = TS.deserialize_cdr(message.data, schema.name)
+            out.append((channel.topic, schema.name, message.log_time, msg))
+    topics = sorted({m[0] for m in out})
+    return out, export_map(SCENE, topics)
+
+
+@pytest.fixture(scope="module")
+def native_tree(tmp_path_factory):
+    return compile_logs([NATIVE], tmp_path_factory.mktemp("native") / "tree.json").tree
+
+
+def write_rosbag2(
+    folder: Path, messages: list[Message], storage: StoragePlugin, parts: int = 1
+) -> Path:
+    """A rosbag2 directory by rosbags' writer; ``parts`` > 1 splits it in time as
+    ``ros2 bag record --max-bag-duration`` does (each part a bag of its own, then one
+    metadata.yaml listing every file; /tf_static only in the first part)."""
+    folder.mkdir(parents=True)
+    cut = np.array_split(np.arange(len(messages)), parts)
+    infos = []
+    for k, idx in enumerate(cut):
+        part = folder.parent / f"{folder.name}_part{k}"
+        with Writer2(part, version=8, storage_plugin=storage) as w:
+            conns: dict[str, Any] = {}
+            for i in idx:
+                topic, msgtype, t_ns, msg = messages[i]
+                if topic not in conns:
+                    conns[topic] = w.add_connection(topic, msgtype, typestore=TS)
+                w.write(conns[topic], t_ns, TS.serialize_cdr(msg, msgtype))
+        meta = yaml.safe_load((part / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+        for f in meta["relative_file_paths"]:
+            (part / f).rename(folder / f"{folder.name}_{k}{Path(f).suffix}")
+        infos.append(meta)
+        for f in part.iterdir():
+            f.unlink()
+        part.rmdir()
+    info = infos[0]
+    info["relative_file_paths"] = [
+        f"{folder.name}_{k}{Path(i['relative_file_paths'][0]).suffix}" for k, i in enumerate(infos)
+    ]
+    info["files"] = [
+        {**f, "path": p}
+        for i, p in zip(infos, info["relative_file_paths"], strict=True)
+        for f in i["files"]
+    ]
+    counts: dict[str, Any] = {}
+    for i in infos:
+        for t in i["topics_with_message_count"]:
+            name = t["topic_metadata"]["name"]
+            if name in counts:
+                counts[name]["message_count"] += t["message_count"]
+            else:
+                counts[name] = dict(t)
+    info["topics_with_message_count"] = list(counts.values())
+    info["message_count"] = sum(i["message_count"] for i in infos)
+    end = max(
+        i["starting_time"]["nanoseconds_since_epoch"] + i["duration"]["nanoseconds"] for i in infos
+    )
+    info["duration"]["nanoseconds"] = end - info["starting_time"]["nanoseconds_since_epoch"]
+    (folder / "metadata.yaml").write_text(yaml.safe_dump({"rosbag2_bagfile_information": info}))
+    return folder
+
+
+def _ros1_store() -> Any:
+    """ROS 1 Noetic's types, with tf2_msgs' TFMessage (not in rosbags' store)."""
+    from rosbags.typesys import get_types_from_msg
+
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    tf = get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage")
+    ts.register(tf)
+    return ts
+
+
+def to_ros1(ts1: Any, msg: Any) -> Any:
+    """A ROS 2 message as its ROS 1 type: the same fields (CameraInfo's K for k, ...),
+    a Header's seq 0."""
+    cls = ts1.types[msg.__msgtype__]
+    values = {}
+    for f in dataclasses.fields(cls):
+        if f.name == "__msgtype__":
+            continue
+        v = getattr(msg, f.name, getattr(msg, f.name.lower(), 0 if f.name == "seq" else None))
+        if hasattr(v, "__msgtype__"):
+            v = to_ros1(ts1, v)
+        elif isinstance(v, list) and v and hasattr(v[0], "__msgtype__"):
+            v = [to_ros1(ts1, x) for x in v]
+        values[f.name] = v
+    return cls(**values)
+
+
+def write_rosbag1(path: Path, messages: list[Message]) -> Path:
+    """A ROS 1 bag by rosbags' writer, in ROS 1's types and encoding."""
+    ts1 = _ros1_store()
+    with Writer1(path) as w:
+        conns: dict[str, Any] = {}
+        for topic, msgtype, t_ns, msg in messages:
+            if topic not in conns:
+                conns[topic] = w.add_connection(topic, msgtype, typestore=ts1)
+            w.write(conns[topic], t_ns, ts1.serialize_ros1(to_ros1(ts1, msg), msgtype))
+    return path
+
+
+def same_tree(tree, native) -> None:
+    """The native tree: same chain and supports, goals within 1 mm."""
+    assert _chain(tree) == _chain(native)
+    for a, b in zip(
+        sorted(native.edges, key=lambda e: e.id),
+        sorted(tree.edges, key=lambda e: e.id),
+        strict=True,
+    ):
+        assert a.smc.action.goal_frame == b.smc.action.goal_frame
+        assert np.abs(_world_goal(a) - _world_goal(b)).max() < 1e-3
+        assert a.smc.action.event == b.smc.action.event
+
+
+def compile_bag(bag: Path, data: dict[str, Any], tmp_path: Path):
+    warnings: list[str] = []
+    tree = compile_logs(
+        [bag], tmp_path / "tree.json", topic_map=parse_topic_map(data), on_warning=warnings.append
+    ).tree
+    assert not [w for w in warnings if "lack" in w], warnings
+    return tree
+
+
+# --- storage ------------------------------------------------------------------------------
+
+STORAGE: dict[str, Callable[[Path, list[Message]], Path]] = {
+    "rosbag2 sqlite3": lambda d, m: write_rosbag2(d / "bag", m, StoragePlugin.SQLITE3),
+    "rosbag2 sqlite3 in 3 files": lambda d, m: write_rosbag2(
+        d / "bag", m, StoragePlugin.SQLITE3, 3
+    ),
+    "rosbag2 MCAP in 2 files": lambda d, m: write_rosbag2(d / "bag", m, StoragePlugin.MCAP, 2),
+    "ROS 1 bag": lambda d, m: write_rosbag1(d / "demo.bag", m),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("shape", list(STORAGE))
+def test_each_storage_compiles_into_the_native_tree(
+    shape: str, exported, native_tree, tmp_path: Path
+) -> None:
+    messages, data = exported
+    bag = STORAGE[shape](tmp_path, messages)
+    same_tree(compile_bag(bag, data, tmp_path), native_tree)
+
+
+def test_a_split_bag_is_one_demonstration(exported, tmp_path: Path) -> None:
+    messages, data = exported
+    bag = write_rosbag2(tmp_path / "bag", messages, StoragePlugin.MCAP, 2)
+    assert len(list(bag.glob("*.mcap"))) == 2
+    log = read_ros2_bag(bag, parse_topic_map(data))
+    native = read_ros2_bag_native()
+    assert len(log.commands) == len(native.commands)
+    assert len(log.frames) == len(native.frames)
+    assert [m.t for m in log.marks] == pytest.approx([m.t for m in native.marks], abs=1e-6)
+
+
+def read_ros2_bag_native():
+    from smccli.logs import read_log
+
+    return read_log(NATIVE)
+
+
+# --- what drivers publish -----------------------------------------------------------------
+
+
+def _split_joints(messages: list[Message], fingers: set[str]) -> Iterator[Message]:
+    """The arm's joints and the gripper's on /joint_states from two publishers, the
+    gripper's 3 ms later."""
+    for topic, msgtype, t_ns, msg in messages:
+        if topic != "/joint_states":
+            yield topic, msgtype, t_ns, msg
+            continue
+        for keep, dt in ((lambda n: n not in fingers, 0), (lambda n: n in fingers, 3_000_000)):
+            idx = [i for i, n in enumerate(msg.name) if keep(n)]
+            part = TS.types["sensor_msgs/msg/JointState"](
+                header=msg.header,
+                name=[msg.name[i] for i in idx],
+                position=msg.position[idx],
+                velocity=msg.velocity[idx] if len(msg.velocity) else msg.velocity,
+                effort=msg.effort[idx] if len(msg.effort) else msg.effort,
+            )
+            yield topic, msgtype, t_ns + dt, part
+
+
+def _renamed(messages: list[Message]) -> Iterator[Message]:
+    for topic, msgtype, t_ns, msg in messages:
+        if topic == "/joint_states":
+            msg = TS.types[msgtype](
+                header=msg.header,
+                name=[f"driver_{n}" for n in msg.name],
+                position=msg.position,
+                velocity=msg.velocity,
+                effort=msg.effort,
+            )
+        yield topic, msgtype, t_ns, msg
+
+
+def _joy_marks(messages: list[Message]) -> Iterator[Message]:
+    """Each mark a press of button 2 on a joystick publishing at 50 Hz."""
+    marks = [t for topic, _, t, _ in messages if topic == "/saliency"]
+    t0, t1 = messages[0][2], messages[-1][2]
+    joy = TS.types["sensor_msgs/msg/Joy"]
+    header = TS.types["std_msgs/msg/Header"]
+    stamp = TS.types["builtin_interfaces/msg/Time"]
+    for t in range(t0, t1, 20_000_000):
+        down = any(0 <= t - m < 100_000_000 for m in marks)
+        h = header(stamp=stamp(sec=t // 10**9, nanosec=t % 10**9), frame_id="")
+        buttons = np.array([0, 0, int(down), 0], dtype=np.int32)
+        yield (
+            "/joy",
+            "sensor_msgs/msg/Joy",
+            t,
+            joy(header=h, axes=np.zeros(6, np.float32), buttons=buttons),
+        )
+    yield from (m for m in messages if m[0] != "/saliency")
+
+
+def _compressed_depth(messages: list[Message]) -> Iterator[Message]:
+    """Depth as image_transport's compressedDepth plugin publishes it: a 12-byte header,
+    then the 16UC1 image as PNG."""
+    image = TS.types["sensor_msgs/msg/CompressedImage"]
+    for topic, msgtype, t_ns, msg in messages:
+        if topic == "/camera/depth/image_raw":
+            raw = np.frombuffer(bytes(msg.data), dtype="<u2").reshape(msg.height, msg.width)
+            ok, png = cv2.imencode(".png", raw)
+            assert ok
+            data = struct.pack("<iff", -1, 0.0, 0.0) + png.tobytes()
+            msg = image(
+                header=msg.header,
+                format="16UC1; compressedDepth png",
+                data=np.frombuffer(data, dtype=np.uint8),
+            )
+            topic, msgtype = "/camera/depth/image_raw/compressedDepth", image.__msgtype__
+        yield topic, msgtype, t_ns, msg
+
+
+def _in_time_order(messages: Iterator[Message]) -> list[Message]:
+    return sorted(messages, key=lambda m: m[2])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "shape", ["two publishers", "renamed joints", "joystick", "compressedDepth"]
+)
+def test_what_drivers_publish_compiles_into_the_native_tree(
+    shape: str, exported, native_tree, tmp_path: Path
+) -> None:
+    messages, data = exported
+    data = yaml.safe_load(yaml.safe_dump(data))
+    if shape == "two publishers":
+        robot = read_ros2_bag_native().joint_states[0].names
+        fingers = {n for n in robot if "finger" in n}
+        assert fingers and len(fingers) < len(robot)
+        messages = _in_time_order(_split_joints(messages, fingers))
+    elif shape == "renamed joints":
+        messages = list(_renamed(messages))
+        names = read_ros2_bag_native().joint_states[0].names
+        data["joints"] = {f"driver_{n}": n for n in names}
+    elif shape == "joystick":
+        messages = _in_time_order(_joy_marks(messages))
+        data["topics"]["marks"] = {"topic": "/joy", "button": 2}
+    else:
+        messages = list(_compressed_depth(messages))
+        data["topics"]["depth"] = "/camera/depth/image_raw/compressedDepth"
+    bag = write_rosbag2(tmp_path / "bag", messages, StoragePlugin.SQLITE3)
+    same_tree(compile_bag(bag, data, tmp_path), native_tree)
+
+
+def test_two_publishers_merge_by_joint_name(exported, tmp_path: Path) -> None:
+    messages, data = exported
+    robot = read_ros2_bag_native().joint_states[0].names
+    fingers = {n for n in robot if "finger" in n}
+    bag = write_rosbag2(
+        tmp_path / "bag", _in_time_order(_split_joints(messages, fingers)), StoragePlugin.MCAP
+    )
+    log = read_ros2_bag(bag, parse_topic_map(data))
+    assert {tuple(sorted(j.names)) for j in log.joint_states} == {tuple(sorted(robot))}
+
+
+# --- what cannot be read: one line ----------------------------------------------------------
+
+
+def test_what_cannot_be_read_is_one_line(exported, tmp_path: Path) -> None:
+    messages, data = exported
+    bag = write_rosbag2(tmp_path / "bag", messages, StoragePlugin.SQLITE3, 2)
+    db3 = sorted(bag.glob("*.db3"))[0]
+    with pytest.raises(LogError, match=r"one file of a sqlite3 bag: give its directory"):
+        read_ros2_bag(db3, parse_topic_map(data))
+    (bag / "metadata.yaml").unlink()
+    with pytest.raises(LogError, match=r"needs its metadata.yaml"):
+        read_ros2_bag(bag, parse_topic_map(data))
+    rvl = tmp_path / "rvl"
+    image = TS.types["sensor_msgs/msg/CompressedImage"]
+    messages = [
+        (t, m, n, image(header=x.header, format="16UC1; compressedDepth rvl", data=x.data))
+        if t == "/camera/depth/image_raw/compressedDepth"
+        else (t, m, n, x)
+        for t, m, n, x in _compressed_depth(messages)
+    ]
+    write_rosbag2(rvl, messages, StoragePlugin.MCAP)
+    data = yaml.safe_load(yaml.safe_dump(data))
+    data["topics"]["depth"] = "/camera/depth/image_raw/compressedDepth"
+    (tmp_path / "map.yaml").write_text(yaml.safe_dump(data))
+    proc = smc("compile", rvl, "--topics", tmp_path / "map.yaml", "-o", tmp_path / "t.json")
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "RVL is not read" in lines[0], proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+@pytest.mark.slow
+def test_doctor_exits_as_compile_does(exported, tmp_path: Path) -> None:
+    """On each shape doctor's exit code is compile's: 0 where compile makes the tree, 2
+    where it refuses the bag; never a traceback."""
+    messages, data = exported
+    bags = {
+        "sqlite3 in 2 files": write_rosbag2(tmp_path / "a", messages, StoragePlugin.SQLITE3, 2),
+        "ROS 1": write_rosbag1(tmp_path / "b.bag", messages),
+        "no metadata.yaml": write_rosbag2(tmp_path / "c", messages, StoragePlugin.SQLITE3, 2),
+    }
+    (bags["no metadata.yaml"] / "metadata.yaml").unlink()
+    (tmp_path / "map.yaml").write_text(yaml.safe_dump(data))
+    for shape, bag in bags.items():
+        topics = ("--topics", tmp_path / "map.yaml")
+        doctor = smc("doctor", bag, *topics)
+        out = tmp_path / f"{bag.stem}.json"
+        compiled = smc("compile", bag, *topics, "-o", out)
+        assert doctor.returncode == compiled.returncode, (shape, doctor.stdout, compiled.stderr)
+        assert compiled.returncode == (2 if shape == "no metadata.yaml" else 0), shape
+        assert "Traceback" not in doctor.stderr + compiled.stderr
+        if compiled.returncode == 0:  # inspect shows it: the camera and the POI's path
+            rrd = tmp_path / f"{bag.stem}.rrd"
+            shown = smc("inspect", out, bag, *topics, "--save", rrd)
+            assert shown.returncode == 0, shown.stderr
+            (entities,) = read_rrd(rrd).values()
+            assert {"/world/poi/path", "/world/camera/image"} <= set(entities), sorted(entities)
