@@ -286,13 +286,36 @@ def _compressed_depth(messages: list[Message]) -> Iterator[Message]:
         yield topic, msgtype, t_ns, msg
 
 
+def _poi_as_tf(messages: list[Message]) -> Iterator[Message]:
+    """No POI topic: the POI is the frame tool0 in /tf (as a UR driver publishes it), its
+    transform from the world at each pose the native log measured."""
+    tf = TS.types["tf2_msgs/msg/TFMessage"]
+    stamped = TS.types["geometry_msgs/msg/TransformStamped"]
+    transform = TS.types["geometry_msgs/msg/Transform"]
+    vector = TS.types["geometry_msgs/msg/Vector3"]
+    header = TS.types["std_msgs/msg/Header"]
+    for topic, msgtype, t_ns, msg in messages:
+        if topic != "/robot/poi":
+            yield topic, msgtype, t_ns, msg
+            continue
+        p = msg.pose.position
+        tr = stamped(
+            header=header(stamp=msg.header.stamp, frame_id=msg.header.frame_id),
+            child_frame_id="tool0",
+            transform=transform(
+                translation=vector(x=p.x, y=p.y, z=p.z), rotation=msg.pose.orientation
+            ),
+        )
+        yield "/tf", "tf2_msgs/msg/TFMessage", t_ns, tf(transforms=[tr])
+
+
 def _in_time_order(messages: Iterator[Message]) -> list[Message]:
     return sorted(messages, key=lambda m: m[2])
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "shape", ["two publishers", "renamed joints", "joystick", "compressedDepth"]
+    "shape", ["two publishers", "renamed joints", "joystick", "compressedDepth", "POI from TF"]
 )
 def test_what_drivers_publish_compiles_into_the_native_tree(
     shape: str, exported, native_tree, tmp_path: Path
@@ -311,9 +334,12 @@ def test_what_drivers_publish_compiles_into_the_native_tree(
     elif shape == "joystick":
         messages = _in_time_order(_joy_marks(messages))
         data["topics"]["marks"] = {"topic": "/joy", "button": 2}
-    else:
+    elif shape == "compressedDepth":
         messages = list(_compressed_depth(messages))
         data["topics"]["depth"] = "/camera/depth/image_raw/compressedDepth"
+    else:
+        messages = list(_poi_as_tf(messages))
+        data["topics"]["poi"] = {"frame": "tool0"}
     bag = write_rosbag2(tmp_path / "bag", messages, StoragePlugin.SQLITE3)
     same_tree(compile_bag(bag, data, tmp_path), native_tree)
 

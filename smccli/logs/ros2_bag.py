@@ -75,14 +75,18 @@ class TopicMap:
     """A driver's joint name -> the robot file's (``joints`` in the map)."""
     mark_button: int = 0
     """The button of a ``sensor_msgs/Joy`` marks topic whose press is a mark."""
+    poi_frame: str | None = None
+    """The POI as a TF frame (``poi: {frame: tool0}``) when no topic holds its pose."""
 
 
 def parse_topic_map(data: dict[str, Any], path: Path | None = None) -> TopicMap:
     """A map from already schema-valid data (``schemas/topic_map.schema.json``)."""
     topics: dict[str, str] = {}
-    scale, button = 0.001, 0
+    scale, button, poi_frame = 0.001, 0, None
     for role, value in data["topics"].items():
-        if isinstance(value, dict):
+        if isinstance(value, dict) and "frame" in value:  # the POI as a TF frame
+            poi_frame = str(value["frame"]).lstrip("/")
+        elif isinstance(value, dict):
             topics[role] = str(value["topic"])
             scale = float(value.get("scale", scale)) if role == "depth" else scale
             button = int(value.get("button", button)) if role == "marks" else button
@@ -93,7 +97,7 @@ def parse_topic_map(data: dict[str, Any], path: Path | None = None) -> TopicMap:
         scene = str((path.parent / scene).resolve())
     joints = {str(k): str(v) for k, v in (data.get("joints") or {}).items()}
     world = str(data.get("world_frame", "world"))
-    return TopicMap(path, scene, world, topics, scale, joints, button)
+    return TopicMap(path, scene, world, topics, scale, joints, button, poi_frame)
 
 
 def load_topic_map(path: str | Path) -> TopicMap:
@@ -132,6 +136,23 @@ class _TfBuffer:
                 times, values = self._dynamic.setdefault(child, ([], []))
                 times.append(_ns(tr.header.stamp))
                 values.append((parent, T))
+
+    def chain_times(self, frame: str) -> list[int]:
+        """Every stamp [ns] at which a link between ``frame`` and the world frame moved."""
+        times: set[int] = set()
+        frame = frame.lstrip("/")
+        for _ in range(32):
+            if frame == self.world:
+                break
+            if frame in self._static:
+                frame = self._static[frame][0]
+            elif frame in self._dynamic:
+                stamps, values = self._dynamic[frame]
+                times.update(stamps)
+                frame = values[-1][0]
+            else:
+                break
+        return sorted(times)
 
     def lookup(self, frame: str, t_ns: int) -> np.ndarray | None:
         """T_world_frame at ``t_ns`` (the latest transform of each link at or before it, else
@@ -328,10 +349,14 @@ def _read(path: Path, src: _Source, topic_map: TopicMap, warn: Callable[[str], N
     except (McapError, ValueError, EOFError) as exc:
         raise LogError(f"{path}: a message does not decode ({exc})") from None
     b.merge_joints()
+    if topic_map.poi_frame is not None:
+        b.poi_from_tf(topic_map.poi_frame)
     native_counts = {ROLES[r][0]: counts.get(t, 0) for r, t in topic_map.topics.items()}
     if "command" not in topic_map.topics:
         native_counts[tp.COMMAND] = len(b.poi)  # the measured POI is the demonstrated path
     native_counts[tp.TF] = sum(counts.get(t, 0) for t in TF_TOPICS)
+    if topic_map.poi_frame is not None:
+        native_counts[tp.POI] = len(b.poi)
     return Log(
         path=path,
         sha256=src.sha256,
@@ -432,6 +457,20 @@ class _Builder:
             ranges = np.array(msg.ranges, dtype=float)
             self.scans.append(
                 Scan(t, float(msg.angle_min), float(end), ranges, msg.header.frame_id)
+            )
+
+    def poi_from_tf(self, frame: str) -> None:
+        """The POI as the TF frame ``frame`` in the world frame, ``[x, y, z, yaw]``, at each
+        stamp a link of its chain moved (a UR driver publishes no pose, only TF)."""
+        for t_ns in self.tf.chain_times(frame):
+            T = self.tf.lookup(frame, t_ns)
+            if T is not None:
+                self.poi_t.append(t_ns / 1e9)
+                self.poi.append(np.array([*T[:3, 3], yaw_of(T[:3, :3])]))
+        if not self.poi:
+            raise LogError(
+                f"{self.path}: POI frame {frame!r}: no transforms from it to "
+                f"{self.map.world_frame!r} that move in /tf"
             )
 
     def merge_joints(self) -> None:
