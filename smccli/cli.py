@@ -671,6 +671,52 @@ def doctor(
     raise typer.Exit(dr.exit_code(diagnoses[-1:] if fixed else diagnoses))
 
 
+@app.command("topics")
+def topics_command(
+    bag: Annotated[
+        Path,
+        typer.Argument(help="A bag: rosbag2 directory (MCAP or sqlite3), .mcap or ROS 1 .bag."),
+    ],
+    output: Annotated[
+        Path | None,
+        typer.Option("-o", "--output", help="Write the draft topic map here (YAML) to edit."),
+    ] = None,
+    force: Annotated[bool, typer.Option(help="Overwrite an existing --output.")] = False,
+) -> None:
+    """What a bag holds (topics, types, counts, rates, TF frames) and a draft topic map."""
+    from smccli.logs.bag_topics import bag_contents, draft_map_text
+    from smccli.outputs import check_output, write_atomic
+
+    if output is not None:
+        check_output(output, force=force)
+    contents = bag_contents(bag)
+    table = Table(
+        "topic",
+        "type",
+        "messages",
+        "Hz",
+        "first message",
+        title=f"{escape(str(bag))}: {contents.duration_s:.1f} s",
+        title_justify="left",
+    )
+    for t in contents.topics:
+        table.add_row(escape(t.topic), t.type, str(t.count), f"{t.rate_hz:.1f}", escape(t.detail))
+    out.print(table)
+    if contents.frames:
+        links = [f"{p} -> {c}{' (static)' if s else ''}" for p, c, s in contents.frames]
+        out.print("TF frames: " + escape(", ".join(links)), highlight=False)
+    text = draft_map_text(contents)
+    if output is None:
+        out.print(escape(text), highlight=False)
+        return
+    write_atomic(output, text)
+    out.print(
+        f"[bold green]wrote[/] {escape(str(output))}: fill in its scene, check each role, then "
+        f"`smc doctor {escape(str(bag))} --topics {escape(str(output))}`",
+        highlight=False,
+    )
+
+
 @app.command()
 def export(
     log: Annotated[Path, typer.Argument(help="Native smc log (.mcap) to export.")],

@@ -412,3 +412,48 @@ def test_doctor_exits_as_compile_does(exported, tmp_path: Path) -> None:
             assert shown.returncode == 0, shown.stderr
             (entities,) = read_rrd(rrd).values()
             assert {"/world/poi/path", "/world/camera/image"} <= set(entities), sorted(entities)
+
+
+# --- smc topics: the first thing a person with a new bag runs -------------------------------
+
+DRAFTED: dict[str, Callable[[list[Message]], tuple[list[Message], StoragePlugin | None]]] = {
+    "rosbag2 sqlite3 in 2 files": lambda m: (m, StoragePlugin.SQLITE3),
+    "ROS 1 bag": lambda m: (m, None),
+    "two publishers": lambda m: (
+        _in_time_order(_split_joints(m, {"finger_left_joint", "finger_right_joint"})),
+        StoragePlugin.MCAP,
+    ),
+    "joystick": lambda m: (_in_time_order(_joy_marks(m)), StoragePlugin.SQLITE3),
+    "compressedDepth": lambda m: (list(_compressed_depth(m)), StoragePlugin.MCAP),
+    "POI from TF": lambda m: (list(_poi_as_tf(m)), StoragePlugin.SQLITE3),
+}
+
+
+@pytest.mark.slow
+def test_the_drafted_map_compiles_each_shape_once_its_scene_is_filled_in(
+    exported, native_tree, tmp_path: Path
+) -> None:
+    from smccli.logs.bag_topics import PLACEHOLDER_SCENE, bag_contents, draft_map_text
+
+    messages, _ = exported
+    fingers = {"finger_left_joint", "finger_right_joint"}
+    assert fingers < set(read_ros2_bag_native().joint_states[0].names)
+    for k, make in enumerate(DRAFTED.values()):  # k names the shape in a failure
+        shaped, storage = make(messages)
+        folder = tmp_path / f"s{k}"
+        folder.mkdir()
+        if storage is None:
+            bag = write_rosbag1(folder / "demo.bag", shaped)
+        else:
+            bag = write_rosbag2(folder / "bag", shaped, storage, 2 if k == 0 else 1)
+        text = draft_map_text(bag_contents(bag))
+        assert f"scene: {PLACEHOLDER_SCENE}" in text
+        data = yaml.safe_load(text.replace(f"scene: {PLACEHOLDER_SCENE}", f"scene: {SCENE}"))
+        same_tree(compile_bag(bag, data, folder), native_tree)
+    # The command writes the same draft, and the table names every topic.
+    proc = smc("topics", bag, "-o", tmp_path / "map.yaml")
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "map.yaml").read_text() == text
+    assert "/joint_states" in proc.stdout and "tool0" in proc.stdout
+    again = smc("topics", bag, "-o", tmp_path / "map.yaml")  # an existing map is kept
+    assert again.returncode == 2 and len(again.stderr.strip().splitlines()) == 1

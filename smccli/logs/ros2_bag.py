@@ -205,7 +205,7 @@ def resolve_bag(path: str | Path) -> Path:
 
 
 @dataclass
-class _Source:
+class BagSource:
     """A bag opened for reading: its topics and their types, message counts, smc's
     attachments and metadata (MCAP files only), its digest, and its messages decoded."""
 
@@ -215,12 +215,16 @@ class _Source:
     attachments: dict[str, bytes]
     metadata: dict[str, dict[str, str]]
     sha256: str
+    start_ns: int
+    """Log time of its first message [ns]."""
+    end_ns: int
+    """Log time of its last message [ns]."""
     messages: Callable[[list[str]], Iterator[tuple[str, int, Any]]]
     """Topics -> (topic, log time [ns], decoded message) in log-time order."""
     close: Callable[[], None] = lambda: None
 
 
-def _open_mcap(path: Path) -> _Source:
+def _open_mcap(path: Path) -> BagSource:
     """A ROS 2 bag in one MCAP file, decoded from the definitions it stores
     (``mcap-ros2-support``: it also gives the attachments ``smc export`` writes)."""
     data = path.read_bytes()
@@ -251,10 +255,11 @@ def _open_mcap(path: Path) -> _Source:
             yield channel.topic, message.log_time, decoded
 
     sha = hashlib.sha256(data).hexdigest()
-    return _Source(types, counts, attachments, metadata, sha, messages)
+    t0, t1 = (stats.message_start_time, stats.message_end_time) if stats else (0, 0)
+    return BagSource(types, counts, attachments, metadata, sha, t0, t1, messages)
 
 
-def _open_rosbags(path: Path) -> _Source:
+def _open_rosbags(path: Path) -> BagSource:
     """A rosbag2 directory (sqlite3 or MCAP storage, any number of files) or a ROS 1 bag,
     read with ``rosbags``: messages decoded from the definitions the bag stores, else
     (a sqlite3 bag before Iron stores none) from ROS 2 Humble's standard types."""
@@ -289,7 +294,14 @@ def _open_rosbags(path: Path) -> _Source:
                 raise ValueError(f"{conn.topic}: {type(exc).__name__}: {exc}") from None
             yield conn.topic, t_ns, msg
 
-    return _Source(types, counts, {}, {}, h.hexdigest(), messages, reader.close)
+    t0, t1 = reader.start_time, reader.end_time
+    return BagSource(types, counts, {}, {}, h.hexdigest(), t0, t1, messages, reader.close)
+
+
+def open_bag(path: Path) -> BagSource:
+    """A bag resolved by :func:`resolve_bag`, opened: a rosbag2 directory or a ROS 1 bag
+    through rosbags, an MCAP file through mcap-ros2-support. Close it when done."""
+    return _open_rosbags(path) if path.is_dir() or path.suffix == ".bag" else _open_mcap(path)
 
 
 def read_ros2_bag(
@@ -307,14 +319,14 @@ def read_ros2_bag(
     world frame, an image that does not decode.
     """
     path = resolve_bag(path)
-    src = _open_rosbags(path) if path.is_dir() or path.suffix == ".bag" else _open_mcap(path)
+    src = open_bag(path)
     try:
         return _read(path, src, topic_map, on_warning or (lambda msg: None))
     finally:
         src.close()
 
 
-def _read(path: Path, src: _Source, topic_map: TopicMap, warn: Callable[[str], None]) -> Log:
+def _read(path: Path, src: BagSource, topic_map: TopicMap, warn: Callable[[str], None]) -> Log:
     from smccli.world.scene import load_scene
 
     types, counts, attachments, metadata = src.types, src.counts, src.attachments, src.metadata
