@@ -386,27 +386,59 @@ def test_what_cannot_be_read_is_one_line(exported, tmp_path: Path) -> None:
     assert "Traceback" not in proc.stderr
 
 
+def _without_camera_tf(messages: list[Message]) -> Iterator[Message]:
+    tf = TS.types["tf2_msgs/msg/TFMessage"]
+    for topic, msgtype, t_ns, msg in messages:
+        if topic == "/tf":
+            kept = [tr for tr in msg.transforms if tr.child_frame_id != "camera"]
+            if not kept:
+                continue
+            msg = tf(transforms=kept)
+        yield topic, msgtype, t_ns, msg
+
+
 @pytest.mark.slow
 def test_doctor_exits_as_compile_does(exported, tmp_path: Path) -> None:
     """On each shape doctor's exit code is compile's: 0 where compile makes the tree, 2
-    where it refuses the bag; never a traceback."""
+    where it refuses the bag (each reason one line naming the bag's topic or frame);
+    never a traceback."""
     messages, data = exported
-    bags = {
-        "sqlite3 in 2 files": write_rosbag2(tmp_path / "a", messages, StoragePlugin.SQLITE3, 2),
-        "ROS 1": write_rosbag1(tmp_path / "b.bag", messages),
-        "no metadata.yaml": write_rosbag2(tmp_path / "c", messages, StoragePlugin.SQLITE3, 2),
+    cases = {
+        "sqlite3 in 2 files": (
+            write_rosbag2(tmp_path / "a", messages, StoragePlugin.SQLITE3, 2),
+            0,
+        ),
+        "ROS 1": (write_rosbag1(tmp_path / "b.bag", messages), 0),
+        "no metadata.yaml": (write_rosbag2(tmp_path / "c", messages, StoragePlugin.SQLITE3, 2), 2),
+        "driver's joint names": (
+            write_rosbag2(tmp_path / "d", list(_renamed(messages)), StoragePlugin.MCAP),
+            2,
+        ),
+        "no camera transform": (
+            write_rosbag2(
+                tmp_path / "e", list(_without_camera_tf(messages)), StoragePlugin.SQLITE3
+            ),
+            2,
+        ),
     }
-    (bags["no metadata.yaml"] / "metadata.yaml").unlink()
+    (tmp_path / "c" / "metadata.yaml").unlink()
     (tmp_path / "map.yaml").write_text(yaml.safe_dump(data))
-    for shape, bag in bags.items():
-        topics = ("--topics", tmp_path / "map.yaml")
+    topics = ("--topics", tmp_path / "map.yaml")
+    for shape, (bag, code) in cases.items():
         doctor = smc("doctor", bag, *topics)
         out = tmp_path / f"{bag.stem}.json"
         compiled = smc("compile", bag, *topics, "-o", out)
-        assert doctor.returncode == compiled.returncode, (shape, doctor.stdout, compiled.stderr)
-        assert compiled.returncode == (2 if shape == "no metadata.yaml" else 0), shape
+        assert compiled.returncode == code, (shape, compiled.stderr)
+        assert doctor.returncode == code, (shape, doctor.stdout)
         assert "Traceback" not in doctor.stderr + compiled.stderr
-        if compiled.returncode == 0:  # inspect shows it: the camera and the POI's path
+        if code == 2:
+            assert compiled.stderr.count("error:") == 1, compiled.stderr
+        if shape == "driver's joint names":
+            assert "/joint_states: joint driver_joint1" in compiled.stderr
+            assert "`joints:`" in compiled.stderr
+        if shape == "no camera transform":
+            assert "lack a transform from frame camera to 'world'" in compiled.stderr
+        if code == 0:  # inspect shows it: the camera and the POI's path
             rrd = tmp_path / f"{bag.stem}.rrd"
             shown = smc("inspect", out, bag, *topics, "--save", rrd)
             assert shown.returncode == 0, shown.stderr

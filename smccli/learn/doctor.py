@@ -579,6 +579,26 @@ def _check_saliency(c: _Context) -> Check:
     return Check("saliency", "ok" if frags else "warn", text)
 
 
+def _check_smcs(c: _Context) -> Check:
+    """What compile extracts from the log with its scene's parameters (a fresh tree): an
+    SMC per fragment, or the error compile would stop on."""
+    from smccli.learn.compile import extract_chain, scene_params
+    from smccli.learn.segmentation import SegmentMode
+    from smccli.world.scene import scene_of_log
+
+    assert c.log is not None
+    try:
+        scene = scene_of_log(c.log.attachments, c.path)
+        chain = extract_chain(c.log, scene_params(scene), SegmentMode.markers, scene)
+    except SmcError as e:
+        return Check("smcs", "error", _one_line(c.path, str(e)))
+    frames = {s.action.goal_frame for s in chain.smcs}
+    text = f"compile extracts {_n(len(chain.smcs), 'SMC')} (goals in {', '.join(sorted(frames))})"
+    if chain.warnings:
+        return Check("smcs", "warn", text + "; " + "; ".join(chain.warnings))
+    return Check("smcs", "ok", text)
+
+
 _CHECKS: tuple[tuple[str, Callable[[_Context], Check], bool], ...] = (
     ("metadata", _check_metadata, False),
     ("end", _check_end, False),
@@ -588,6 +608,7 @@ _CHECKS: tuple[tuple[str, Callable[[_Context], Check], bool], ...] = (
     ("time order", _check_time_order, False),
     ("numbers", _check_numbers, False),
     ("saliency", _check_saliency, True),
+    ("smcs", _check_smcs, True),
 )
 """The rows after ``read``: (name, check, whether it needs the log as read_log decodes it)."""
 

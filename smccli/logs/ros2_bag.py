@@ -361,6 +361,15 @@ def _read(path: Path, src: BagSource, topic_map: TopicMap, warn: Callable[[str],
     except (McapError, ValueError, EOFError) as exc:
         raise LogError(f"{path}: a message does not decode ({exc})") from None
     b.merge_joints()
+    robot_joints = scene.robot.joint_names
+    unknown = [n for n in (b.joints[0].names if b.joints else ()) if n not in robot_joints]
+    if unknown:
+        raise LogError(
+            f"{path}: topic {topic_map.topics['joint_states']}: joint "
+            f"{', '.join(unknown[:4])}{', ...' if len(unknown) > 4 else ''} not in robot "
+            f"{scene.robot.name!r} ({', '.join(robot_joints)}); name the driver's joints "
+            "with `joints:` in the topic map"
+        )
     if topic_map.poi_frame is not None:
         b.poi_from_tf(topic_map.poi_frame)
     native_counts = {ROLES[r][0]: counts.get(t, 0) for r, t in topic_map.topics.items()}
@@ -584,25 +593,40 @@ class _Builder:
 
         depth_t = np.array([t for t, _ in self.depth], dtype=np.int64)
         info_t = [t for t, _ in self.info]
-        out, dropped = [], 0
+        out: list[CameraFrame] = []
+        no_depth, no_info, no_tf, untransformed = 0, 0, 0, set()
         for t_ns, frame_id, msg in self.color:
-            rgb = self._rgb(msg, decode_color)
             i = int(np.argmin(np.abs(depth_t - t_ns))) if len(depth_t) else -1
             k = bisect.bisect_right(info_t, t_ns) - 1
             T = self.tf.lookup(frame_id, t_ns)
-            if i < 0 or abs(int(depth_t[i]) - t_ns) > FRAME_MATCH_NS or T is None:
-                dropped += 1
+            lacks_depth = i < 0 or abs(int(depth_t[i]) - t_ns) > FRAME_MATCH_NS
+            no_depth += lacks_depth
+            no_info += not self.info
+            if T is None:
+                no_tf += 1
+                untransformed.add(frame_id or "''")
+            if lacks_depth or not self.info or T is None:
                 continue
+            rgb = self._rgb(msg, decode_color)
             depth = self._depth(self.depth[i][1], rgb.shape[:2])
-            K = self.info[max(k, 0)][1] if self.info else None
-            if K is None:
-                dropped += 1
-                continue
-            out.append(CameraFrame(t_ns / 1e9, rgb, depth, K, T, frame_id))
-        if dropped:
+            out.append(CameraFrame(t_ns / 1e9, rgb, depth, self.info[max(k, 0)][1], T, frame_id))
+        why = []
+        if no_depth:
+            topic = self.map.topics.get("depth", "(no depth topic mapped)")
+            why.append(f"{no_depth} lack a depth image on {topic} within 20 ms")
+        if no_info:
+            why.append(f"{no_info} lack camera info on {self.map.topics['camera_info']}")
+        if no_tf:
+            frames = ", ".join(sorted(untransformed))
+            why.append(
+                f"{no_tf} lack a transform from frame {frames} to {self.map.world_frame!r} "
+                "in /tf or /tf_static"
+            )
+        if why:
+            n, color = len(self.color), self.map.topics["color"]
             self.warn(
-                f"{self.path}: {dropped} colour images lack a depth image within 20 ms, camera "
-                "info or a transform to the world frame"
+                f"{self.path}: {n - len(out)} of {n} colour images on {color} are left out: "
+                + "; ".join(why)
             )
         return out
 
