@@ -489,3 +489,37 @@ def test_the_drafted_map_compiles_each_shape_once_its_scene_is_filled_in(
     assert "/joint_states" in proc.stdout and "tool0" in proc.stdout
     again = smc("topics", bag, "-o", tmp_path / "map.yaml")  # an existing map is kept
     assert again.returncode == 2 and len(again.stderr.strip().splitlines()) == 1
+
+
+def _shifted(msg: Any, dt_ns: int) -> Any:
+    """``msg`` with every stamp in it ``dt_ns`` later."""
+    if getattr(msg, "__msgtype__", "") == "builtin_interfaces/msg/Time":
+        t = msg.sec * 10**9 + msg.nanosec + dt_ns
+        return type(msg)(sec=t // 10**9, nanosec=t % 10**9)
+    if not dataclasses.is_dataclass(msg):
+        return msg
+    values = {}
+    for f in dataclasses.fields(msg):
+        if f.name == "__msgtype__":
+            continue
+        v = getattr(msg, f.name)
+        values[f.name] = (
+            [_shifted(x, dt_ns) for x in v] if isinstance(v, list) else _shifted(v, dt_ns)
+        )
+    return type(msg)(**values)
+
+
+def test_times_a_person_reads_are_seconds_from_the_bags_start(exported, tmp_path: Path) -> None:
+    """A bag stamped with the wall clock (seconds since 1970) reads from 0: a tree's
+    sources say where in the bag each fragment is."""
+    messages, data = exported
+    epoch = 1_732_600_000 * 10**9
+    late = [(t, m, n + epoch, _shifted(x, epoch)) for t, m, n, x in messages]
+    bag = write_rosbag2(tmp_path / "bag", late, StoragePlugin.MCAP)
+    log = read_ros2_bag(bag, parse_topic_map(data))
+    assert 0 <= log.poi_t[0] < 0.1 and log.frames[0].t < 1.0
+    assert [m.t for m in log.marks] == pytest.approx(
+        [m.t for m in read_ros2_bag_native().marks], abs=0.05
+    )
+    tree = compile_bag(bag, data, tmp_path)
+    assert all(0 <= s.t0 < s.t1 < 60 for e in tree.edges for s in e.sources)

@@ -310,9 +310,9 @@ def read_ros2_bag(
     *,
     on_warning: Callable[[str], None] | None = None,
 ) -> Log:
-    """Read a bag through ``topic_map`` into a Log (times in seconds of the bag's clock;
-    poses in the map's world frame): a ROS 2 bag in MCAP, a rosbag2 directory (sqlite3 or
-    MCAP, split or not) or a ROS 1 bag.
+    """Read a bag through ``topic_map`` into a Log (times in seconds from the bag's first
+    message; poses in the map's world frame): a ROS 2 bag in MCAP, a rosbag2 directory
+    (sqlite3 or MCAP, split or not) or a ROS 1 bag.
 
     LogError (one line naming the file, and the topic) for a file that is not a readable
     bag, a mapped topic missing or holding another type, a pose without a transform to the
@@ -353,7 +353,7 @@ def _read(path: Path, src: BagSource, topic_map: TopicMap, warn: Callable[[str],
         "has_scale": "true" if "weight" in topic_map.topics else "false",
     }
 
-    b = _Builder(path, topic_map, scene.robot, warn)
+    b = _Builder(path, topic_map, scene.robot, warn, src.start_ns)
     wanted = [*topic_map.topics.values(), *(t for t in TF_TOPICS if t in types)]
     try:
         for topic, t_ns, decoded in src.messages(wanted):
@@ -404,8 +404,13 @@ def _read(path: Path, src: BagSource, topic_map: TopicMap, warn: Callable[[str],
 class _Builder:
     """Collects the decoded messages of one bag, role by role."""
 
-    def __init__(self, path: Path, m: TopicMap, robot: Any, warn: Callable[[str], None]) -> None:
+    def __init__(
+        self, path: Path, m: TopicMap, robot: Any, warn: Callable[[str], None], origin_ns: int
+    ) -> None:
         self.path, self.map, self.robot, self.warn = path, m, robot, warn
+        self.origin = origin_ns
+        """The bag's first message [ns]: a Log's times are seconds from it, as a person
+        reads them (stamps stay absolute for the transforms)."""
         self.role = {topic: role for role, topic in m.topics.items()}
         self.tf = _TfBuffer(m.world_frame)
         self.targets: list[tuple[float, np.ndarray]] = []
@@ -430,7 +435,7 @@ class _Builder:
             self.tf.add(msg, static=topic == "/tf_static")
             return
         role = self.role[topic]
-        t = t_ns / 1e9
+        t = self.seconds(t_ns)
         if role in ("command", "poi"):
             pose = self._pose(topic, msg)
             if role == "command":
@@ -480,13 +485,17 @@ class _Builder:
                 Scan(t, float(msg.angle_min), float(end), ranges, msg.header.frame_id)
             )
 
+    def seconds(self, t_ns: int) -> float:
+        """A time of the bag [ns] in seconds from its first message."""
+        return (t_ns - self.origin) / 1e9
+
     def poi_from_tf(self, frame: str) -> None:
         """The POI as the TF frame ``frame`` in the world frame, ``[x, y, z, yaw]``, at each
         stamp a link of its chain moved (a UR driver publishes no pose, only TF)."""
         for t_ns in self.tf.chain_times(frame):
             T = self.tf.lookup(frame, t_ns)
             if T is not None:
-                self.poi_t.append(t_ns / 1e9)
+                self.poi_t.append(self.seconds(t_ns))
                 self.poi.append(np.array([*T[:3, 3], yaw_of(T[:3, :3])]))
         if not self.poi:
             raise LogError(
@@ -520,7 +529,7 @@ class _Builder:
         W = self.tf.lookup(frame, _ns(header.stamp))
         if W is None:
             raise LogError(
-                f"{self.path}: {topic} at t={_ns(header.stamp) / 1e9:.3f} s: no transform "
+                f"{self.path}: {topic} at t={self.seconds(_ns(header.stamp)):.3f} s: no transform "
                 f"from frame {frame!r} to {self.map.world_frame!r} in /tf or /tf_static"
             )
         return W
@@ -609,7 +618,8 @@ class _Builder:
                 continue
             rgb = self._rgb(msg, decode_color)
             depth = self._depth(self.depth[i][1], rgb.shape[:2])
-            out.append(CameraFrame(t_ns / 1e9, rgb, depth, self.info[max(k, 0)][1], T, frame_id))
+            K = self.info[max(k, 0)][1]
+            out.append(CameraFrame(self.seconds(t_ns), rgb, depth, K, T, frame_id))
         why = []
         if no_depth:
             topic = self.map.topics.get("depth", "(no depth topic mapped)")
