@@ -44,7 +44,7 @@ from smccli.learn.tree import FORMAT, ROOT, Tree, digest, insert_chain, load_tre
 from smccli.logs import Log, read_log
 from smccli.logs import topics as tp
 from smccli.logs.robot import geometry_at, robot_model_of
-from smccli.logs.ros2_bag import TopicMap, read_ros2_bag
+from smccli.logs.ros2_bag import ROLES, TopicMap, read_ros2_bag
 from smccli.outputs import ExclusiveLock, check_output
 from smccli.perception import Cluster, clusters_from_frame, salient_cluster, scale_reading
 from smccli.perception.params import scene_perception
@@ -320,10 +320,14 @@ def _read(job: _Job) -> _Read:
             required_topics(log, scene) - {t for t, n in log.topic_counts.items() if n > 0}
         )
         if missing:
-            raise LogError(
-                f"{path}: topic {missing[0]} missing (scene "
-                f"{log.metadata.get('scene', '?')} needs it)"
-            )
+            scene_name = log.metadata.get("scene", "?")
+            if job.topic_map is not None:  # say it in the bag's terms: the map's role
+                role = next((r for r, (native, _) in ROLES.items() if native == missing[0]), "?")
+                raise LogError(
+                    f"{path}: the topic map gives no {role} topic (scene {scene_name} needs "
+                    f"one: {' or '.join(ROLES[role][1]) if role in ROLES else missing[0]})"
+                )
+            raise LogError(f"{path}: topic {missing[0]} missing (scene {scene_name} needs it)")
     except SmcError as e:
         return _Read(path, tuple(warnings), error=e)
     read = _Read(path, tuple(warnings), sha256=log.sha256, metadata=dict(log.metadata))

@@ -38,7 +38,7 @@ from smccli.logs.log import Log
 from smccli.logs.reader import read_log
 from smccli.logs.records import RawLog, read_bytes, scan_records
 from smccli.logs.rewrite import copy_log
-from smccli.logs.ros2_bag import TopicMap, read_ros2_bag, resolve_bag
+from smccli.logs.ros2_bag import ROLES, TopicMap, read_ros2_bag, resolve_bag
 from smccli.outputs import check_output, write_atomic
 
 Status = Literal["ok", "warn", "error"]
@@ -235,6 +235,8 @@ class _Context:
     log: Log | None = None
     read_error: str = ""
     warnings: list[str] = field(default_factory=list)
+    topic_map: TopicMap | None = None
+    """The map a bag is read through: its topics are named as the bag names them."""
 
 
 def _one_line(path: Path, msg: str) -> str:
@@ -453,14 +455,27 @@ def _check_topics(c: _Context) -> Check:
     counts = c.log.topic_counts
     scene = c.log.metadata.get("scene", "?")
     missing = [t for t in needed if counts.get(t, 0) == 0]
+    m = c.topic_map
+    if m is not None:  # in the bag's terms: the map's roles and the bag's topics
+        role = {native: r for r, (native, _) in ROLES.items() if r in m.topics}
+        role.setdefault(tp.POI, "poi")
+        name = {t: m.topics.get(role.get(t, ""), f"the map's {role.get(t, t)}") for t in needed}
+        missing = [f"the map's {ROLES_OF.get(t, t)} topic" for t in missing]
+    else:
+        name = {t: t for t in needed}
     if missing:
         return Check("topics", "error", f"{', '.join(missing)} missing (scene {scene} needs it)")
     low = min(needed, key=lambda t: counts[t])
     return Check(
         "topics",
         "ok",
-        f"all {len(needed)} topics scene {scene} needs (fewest: {low}, {counts[low]} messages)",
+        f"all {len(needed)} topics scene {scene} needs (fewest: {name[low]}, "
+        f"{counts[low]} messages)",
     )
+
+
+ROLES_OF = {native: role for role, (native, _) in reversed(ROLES.items())}
+"""A native topic -> the map's role that stands for it (the first role listed)."""
 
 
 def _check_time_order(c: _Context) -> Check:
@@ -669,7 +684,7 @@ def _diagnose_rosbags(path: Path, topic_map: TopicMap) -> Diagnosis:
     files = [path] if path.is_file() else sorted(q for q in path.iterdir() if q.is_file())
     kind = "ROS 1 bag" if path.is_file() else "rosbag2 directory"
     size = sum(f.stat().st_size for f in files)
-    c = _Context(path=path, data=b"", layout=_layout(b""))
+    c = _Context(path=path, data=b"", layout=_layout(b""), topic_map=topic_map)
     try:
         c.log = read_ros2_bag(path, topic_map, on_warning=c.warnings.append)
     except SmcError as e:
@@ -686,7 +701,7 @@ def _diagnose_rosbags(path: Path, topic_map: TopicMap) -> Diagnosis:
 def _diagnose_bag(path: Path, data: bytes, topic_map: TopicMap) -> Diagnosis:
     """A ROS 2 bag: the file, then reading it through the map (topics present and of the
     mapped types, CDR decoding, transforms), then what compile needs (topics, marks)."""
-    c = _Context(path=path, data=data, layout=_layout(data))
+    c = _Context(path=path, data=data, layout=_layout(data), topic_map=topic_map)
     try:
         c.log = read_ros2_bag(path, topic_map, on_warning=c.warnings.append)
     except SmcError as e:
