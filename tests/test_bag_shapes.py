@@ -165,11 +165,17 @@ def same_tree(tree, native) -> None:
 
 
 def compile_bag(bag: Path, data: dict[str, Any], tmp_path: Path):
+    """The bag's tree; and smc inspect shows the bag (its camera, its POI's path)."""
+    from smccli.inspect.recording import inspect
+
     warnings: list[str] = []
-    tree = compile_logs(
-        [bag], tmp_path / "tree.json", topic_map=parse_topic_map(data), on_warning=warnings.append
-    ).tree
+    topic_map = parse_topic_map(data)
+    tree_path = tmp_path / "tree.json"
+    tree = compile_logs([bag], tree_path, topic_map=topic_map, on_warning=warnings.append).tree
     assert not [w for w in warnings if "lack" in w], warnings
+    inspect(tree_path, [bag], save=tmp_path / "bag.rrd", topic_map=topic_map, force=True)
+    (entities,) = read_rrd(tmp_path / "bag.rrd").values()
+    assert {"/world/poi/path", "/world/camera/image"} <= set(entities), sorted(entities)
     return tree
 
 
