@@ -165,8 +165,10 @@ def same_tree(tree, native) -> None:
 
 
 def compile_bag(bag: Path, data: dict[str, Any], tmp_path: Path):
-    """The bag's tree; and smc inspect shows the bag (its camera, its POI's path)."""
+    """The bag's tree; smc inspect shows the bag (its camera, its POI's path), and doctor
+    finds it healthy, as compile did (exit 0 both)."""
     from smccli.inspect.recording import inspect
+    from smccli.learn.doctor import diagnose, exit_code
 
     warnings: list[str] = []
     topic_map = parse_topic_map(data)
@@ -176,6 +178,8 @@ def compile_bag(bag: Path, data: dict[str, Any], tmp_path: Path):
     inspect(tree_path, [bag], save=tmp_path / "bag.rrd", topic_map=topic_map, force=True)
     (entities,) = read_rrd(tmp_path / "bag.rrd").values()
     assert {"/world/poi/path", "/world/camera/image"} <= set(entities), sorted(entities)
+    diagnosis = diagnose(bag, topic_map)
+    assert exit_code([diagnosis]) == 0, [(c.name, c.status, c.detail) for c in diagnosis.checks]
     return tree
 
 
