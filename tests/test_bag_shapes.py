@@ -374,6 +374,9 @@ def test_what_cannot_be_read_is_one_line(exported, tmp_path: Path) -> None:
     db3 = sorted(bag.glob("*.db3"))[0]
     with pytest.raises(LogError, match=r"one file of a sqlite3 bag: give its directory"):
         read_ros2_bag(db3, parse_topic_map(data))
+    mcap = write_rosbag2(tmp_path / "split", messages, StoragePlugin.MCAP, 2)
+    with pytest.raises(LogError, match=r"one file of a bag split into 2: give its directory"):
+        read_ros2_bag(sorted(mcap.glob("*.mcap"))[0], parse_topic_map(data))
     (bag / "metadata.yaml").unlink()
     with pytest.raises(LogError, match=r"needs its metadata.yaml"):
         read_ros2_bag(bag, parse_topic_map(data))

@@ -201,7 +201,24 @@ def resolve_bag(path: str | Path) -> Path:
         raise LogError(f"{p}: no such file")
     if p.suffix == ".db3":
         raise LogError(f"{p}: one file of a sqlite3 bag: give its directory (with metadata.yaml)")
+    listed = _bag_files(p.parent)
+    if p.suffix == ".mcap" and len(listed) > 1 and p.name in listed:
+        raise LogError(
+            f"{p}: one file of a bag split into {len(listed)}: give its directory {p.parent} "
+            "(one demonstration)"
+        )
     return p
+
+
+def _bag_files(folder: Path) -> list[str]:
+    """The storage files a rosbag2 directory's metadata.yaml lists (none without one)."""
+    import yaml
+
+    try:
+        meta = yaml.safe_load((folder / "metadata.yaml").read_text())
+        return [str(f) for f in meta["rosbag2_bagfile_information"]["relative_file_paths"]]
+    except (OSError, yaml.YAMLError, KeyError, TypeError):
+        return []
 
 
 @dataclass
