@@ -681,6 +681,13 @@ def topics_command(
         Path | None,
         typer.Option("-o", "--output", help="Write the draft topic map here (YAML) to edit."),
     ] = None,
+    scene: Annotated[
+        str | None,
+        typer.Option(
+            help="The scene the bag was recorded in (name or scene.yaml): fills in the map's "
+            "scene and matches the driver's joint names to its robot's."
+        ),
+    ] = None,
     force: Annotated[bool, typer.Option(help="Overwrite an existing --output.")] = False,
 ) -> None:
     """What a bag holds (topics, types, counts, rates, TF frames) and a draft topic map."""
@@ -705,7 +712,7 @@ def topics_command(
     if contents.frames:
         links = [f"{p} -> {c}{' (static)' if s else ''}" for p, c, s in contents.frames]
         out.print("TF frames: " + escape(", ".join(links)), highlight=False)
-    text = draft_map_text(contents)
+    text = draft_map_text(contents, scene)
     if output is None:
         out.print(escape(text), highlight=False)
         return

@@ -495,6 +495,14 @@ def test_the_drafted_map_compiles_each_shape_once_its_scene_is_filled_in(
         assert f"scene: {PLACEHOLDER_SCENE}" in text
         data = yaml.safe_load(text.replace(f"scene: {PLACEHOLDER_SCENE}", f"scene: {SCENE}"))
         same_tree(compile_bag(bag, data, folder), native_tree)
+    # A driver's joint names: with the scene given, the draft matches them to the robot's.
+    renamed = write_rosbag2(tmp_path / "renamed", list(_renamed(messages)), StoragePlugin.MCAP)
+    text_renamed = draft_map_text(bag_contents(renamed), SCENE)
+    data = yaml.safe_load(text_renamed)
+    assert data["scene"] == SCENE and data["joints"]["driver_joint1"] == "joint1"
+    same_tree(compile_bag(renamed, data, tmp_path), native_tree)
+    proc = smc("topics", renamed, "--scene", SCENE, "-o", tmp_path / "renamed.yaml")
+    assert proc.returncode == 0 and (tmp_path / "renamed.yaml").read_text() == text_renamed
     # The command writes the same draft, and the table names every topic.
     proc = smc("topics", bag, "-o", tmp_path / "map.yaml")
     assert proc.returncode == 0, proc.stderr

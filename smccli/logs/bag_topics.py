@@ -13,13 +13,17 @@ leaf of the TF tree whose name says tool (``tool0``, ``*_tcp``, ``ee_link``, ...
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
 from smccli.logs.ros2_bag import TF_TOPICS, open_bag, resolve_bag
+
+if TYPE_CHECKING:
+    from smccli.world.robot import Robot
 
 PLACEHOLDER_SCENE = "FILL_IN"
 """The draft map's scene: a bag does not say which scene (and robot) it was recorded in."""
@@ -54,6 +58,8 @@ class BagContents:
     """TF links (parent, child, static) seen in ``/tf`` and ``/tf_static``."""
     pressed: dict[str, tuple[int, ...]]
     """A joystick topic -> the buttons pressed at least once in the bag."""
+    joint_names: dict[str, tuple[str, ...]]
+    """A JointState topic -> the joint names its messages carry (every publisher's)."""
 
 
 def bag_contents(path: str | Path) -> BagContents:
@@ -64,6 +70,7 @@ def bag_contents(path: str | Path) -> BagContents:
     try:
         duration = max((src.end_ns - src.start_ns) / 1e9, 1e-9)
         details: dict[str, str] = {}
+        names: dict[str, dict[str, None]] = {}
         links: dict[tuple[str, str], bool] = {}
         tf_seen = 0
         for topic, _t, msg in src.messages(sorted(src.types)):
@@ -72,8 +79,10 @@ def bag_contents(path: str | Path) -> BagContents:
                 for tr in msg.transforms:
                     key = (tr.header.frame_id.lstrip("/"), tr.child_frame_id.lstrip("/"))
                     links[key] = links.get(key, False) or topic == "/tf_static"
-            elif topic not in details:
-                details[topic] = _detail(msg)
+            else:
+                details.setdefault(topic, _detail(msg))
+                if src.types[topic] == "sensor_msgs/msg/JointState":
+                    names.setdefault(topic, {}).update(dict.fromkeys(str(n) for n in msg.name))
             if len(details) >= len(src.types) - len(TF_TOPICS) and tf_seen >= _SAMPLE_TF:
                 break
         joys = [t for t, kind in src.types.items() if kind == "sensor_msgs/msg/Joy"]
@@ -89,7 +98,8 @@ def bag_contents(path: str | Path) -> BagContents:
     )
     frames = tuple((p, c, s) for (p, c), s in sorted(links.items()))
     buttons = {t: tuple(sorted(b)) for t, b in pressed.items()}
-    return BagContents(Path(path), duration, infos, frames, buttons)
+    joints = {t: tuple(n) for t, n in names.items()}
+    return BagContents(Path(path), duration, infos, frames, buttons, joints)
 
 
 def _detail(msg: Any) -> str:
@@ -129,9 +139,10 @@ def _namespace_match(a: str, b: str) -> int:
     return n
 
 
-def draft_map(c: BagContents) -> tuple[dict[str, Any], list[str]]:
+def draft_map(c: BagContents, robot: Robot | None = None) -> tuple[dict[str, Any], list[str]]:
     """A topic map (``schemas/topic_map.schema.json``) with the roles guessed from ``c``,
-    and notes on what it could not tell (for the YAML's comments)."""
+    and notes on what it could not tell (for the YAML's comments). With the scene's
+    ``robot``, the driver's joint names are matched to the robot file's (``joints``)."""
     topics: dict[str, Any] = {}
     notes: list[str] = []
     images = _of(c, "sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
@@ -186,16 +197,45 @@ def draft_map(c: BagContents) -> tuple[dict[str, Any], list[str]]:
                     f"marks: buttons pressed on {mark.topic}: {list(used)}; set `button` to "
                     "the one the operator pressed at each salient moment"
                 )
-    if joints:
+    renames: dict[str, str] = {}
+    if joints and robot is None:
         notes.append(
             f"joint_states: the driver's names ({joints[0].detail}); if they differ from the "
-            "robot file's, add `joints: {driver_name: robot_name, ...}`"
+            "robot file's, add `joints: {driver_name: robot_name, ...}` (or give --scene)"
         )
+    elif joints and robot is not None:
+        renames, unmatched = match_joints(c.joint_names.get(topics["joint_states"], ()), robot)
+        if unmatched:
+            notes.append(
+                f"joints: {', '.join(unmatched)} match none of robot {robot.name!r}'s "
+                f"({', '.join(robot.joint_names)}): map them by hand"
+            )
     for role in ("color", "depth", "camera_info", "joint_states"):
         if role not in topics:
             notes.append(f"{role}: no topic of its type in the bag")
-    data = {"scene": PLACEHOLDER_SCENE, "world_frame": _world_frame(c), "topics": topics}
+    data: dict[str, Any] = {"scene": PLACEHOLDER_SCENE, "world_frame": _world_frame(c)}
+    if renames:
+        data["joints"] = renames
+    data["topics"] = topics
     return data, notes
+
+
+def match_joints(driver: Sequence[str], robot: Robot) -> tuple[dict[str, str], list[str]]:
+    """The driver's joint names matched to the robot file's: equal, or one ending with the
+    other (``panda_joint1`` and ``joint1``), when exactly one robot joint fits. Returns the
+    renames and the names no robot joint fits."""
+    ours = robot.joint_names
+    renames: dict[str, str] = {}
+    unmatched: list[str] = []
+    for name in driver:
+        if name in ours:
+            continue
+        fits = [r for r in ours if name.endswith(r) or r.endswith(name)]
+        if len(fits) == 1 and fits[0] not in renames.values():
+            renames[name] = fits[0]
+        else:
+            unmatched.append(name)
+    return renames, unmatched
 
 
 def _tool_frame(c: BagContents) -> str | None:
@@ -229,9 +269,18 @@ def _world_frame(c: BagContents) -> str:
     return roots[0] if roots else "world"
 
 
-def draft_map_text(c: BagContents) -> str:
-    """The draft map as YAML, with comments saying what to check."""
-    data, notes = draft_map(c)
+def draft_map_text(c: BagContents, scene: str | None = None) -> str:
+    """The draft map as YAML, with comments saying what to check; ``scene`` (a built-in
+    name or a scene.yaml path) fills in the scene line and matches the joint names."""
+    robot = None
+    if scene is not None:
+        from smccli.world.scene import load_scene
+
+        robot = load_scene(scene).robot
+    data, notes = draft_map(c, robot)
+    if scene is not None:  # a path as the map will read it: relative to nothing
+        path_like = scene.endswith((".yaml", ".yml")) or "/" in scene
+        data["scene"] = str(Path(scene).resolve()) if path_like else scene
     head = [
         f"# Topic map drafted by `smc topics` from {c.path.name}: check every line.",
         "# scene: the scene the bag was recorded in, with its robot (a built-in name, or the",
