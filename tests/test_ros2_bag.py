@@ -252,6 +252,10 @@ def test_a_real_robots_bag_reads_into_the_world_frame(tmp_path: Path) -> None:
         (lambda d: d["topics"].update(colour="/x"), "colour"),
         (lambda d: d["topics"].update(poi="tcp_pose"), "topics.poi"),
         (lambda d: d["topics"].pop("camera_info"), "camera_info"),
+        (
+            lambda d: d["topics"].update(command=d["topics"]["poi"]),
+            "/tcp_pose is both the map's command and its poi",
+        ),
     ],
 )
 def test_bad_maps_are_one_line(tmp_path: Path, edit, message: str) -> None:

@@ -101,13 +101,23 @@ def parse_topic_map(data: dict[str, Any], path: Path | None = None) -> TopicMap:
 
 
 def load_topic_map(path: str | Path) -> TopicMap:
-    """Read and check a topic map file; SceneError (one line: file, key, line) when bad."""
+    """Read and check a topic map file; SceneError (one line: file, key, line) when bad,
+    or when one topic is given two roles (a topic holds one signal)."""
     p = Path(path)
     try:
         text = p.read_text()
     except (OSError, UnicodeDecodeError) as exc:
         raise SceneError(f"{p}: cannot read topic map: {exc}") from None
-    return parse_topic_map(validate_yaml(text, "topic_map", str(p), SceneError), p)
+    m = parse_topic_map(validate_yaml(text, "topic_map", str(p), SceneError), p)
+    roles: dict[str, str] = {}
+    for role, topic in m.topics.items():
+        if topic in roles:
+            raise SceneError(
+                f"{p}: topics: {topic} is both the map's {roles[topic]} and its {role}; "
+                "give each role its own topic (leave an optional one out)"
+            )
+        roles[topic] = role
+    return m
 
 
 # --- transforms --------------------------------------------------------------------------
