@@ -544,3 +544,25 @@ def test_times_a_person_reads_are_seconds_from_the_bags_start(exported, tmp_path
     )
     tree = compile_bag(bag, data, tmp_path)
     assert all(0 <= s.t0 < s.t1 < 60 for e in tree.edges for s in e.sources)
+
+
+def test_compressed_depth_32fc1_is_quantised_inverse_depth() -> None:
+    """image_transport's 32FC1 compressedDepth: v = a / depth + b as 16-bit PNG, 0 where
+    there is no depth; read back as a / (v - b), within the quantisation step."""
+    from smccli.logs.ros2_bag import compressed_depth
+
+    a, b = 1000.0, -20.0  # the plugin's defaults for depth_quantization 100, max 10 m
+    depth = np.array([[0.0, 0.3, 1.0], [2.5, 7.0, np.nan]], dtype=np.float32)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = np.where(np.isfinite(depth) & (depth > 0), a / depth + b, 0.0)
+    ok, png = cv2.imencode(".png", np.round(v).astype(np.uint16))
+    assert ok
+    data = struct.pack("<iff", 0, a, b) + png.tobytes()
+    got = compressed_depth(data, "32FC1; compressedDepth png", 0.001)
+    assert isinstance(got, np.ndarray) and got.dtype == np.float32
+    assert got[0, 0] == 0.0 and got[1, 2] == 0.0  # no depth stays none
+    step = depth[np.isfinite(depth) & (depth > 0)] ** 2 / a  # one unit of v, in metres
+    assert np.all(np.abs(got[depth > 0] - depth[depth > 0]) <= step)
+    assert "not a 16-bit PNG" in compressed_depth(
+        data[:12] + b"junk", "16UC1; compressedDepth", 1.0
+    )
