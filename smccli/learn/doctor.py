@@ -645,7 +645,7 @@ def diagnose(path: str | os.PathLike[str], topic_map: TopicMap | None = None) ->
         if topic_map is not None:
             path = resolve_bag(path)
             if path.is_dir() or path.suffix == ".bag":  # rosbag2 directory, ROS 1 bag
-                return _diagnose_rosbags(path, topic_map)
+                return _diagnose_bag(path, None, topic_map)
         data = read_bytes(path)
     except SmcError as e:
         return _diagnosis(path, [Check("file", "error", _one_line(path, str(e)))])
@@ -678,37 +678,26 @@ def diagnose(path: str | os.PathLike[str], topic_map: TopicMap | None = None) ->
     return _diagnosis(path, checks)
 
 
-def _diagnose_rosbags(path: Path, topic_map: TopicMap) -> Diagnosis:
-    """A rosbag2 directory (sqlite3 or MCAP, split or not) or a ROS 1 bag: its storage is
-    checked by ``rosbags`` as it reads it, then what compile needs, as for an MCAP bag."""
-    files = [path] if path.is_file() else sorted(q for q in path.iterdir() if q.is_file())
-    kind = "ROS 1 bag" if path.is_file() else "rosbag2 directory"
-    size = sum(f.stat().st_size for f in files)
-    c = _Context(path=path, data=b"", layout=_layout(b""), topic_map=topic_map)
+def _diagnose_bag(path: Path, data: bytes | None, topic_map: TopicMap) -> Diagnosis:
+    """A bag: the file (an MCAP file's records and CRCs; a rosbag2 directory's or a ROS 1
+    bag's storage is checked by ``rosbags`` as it reads it), then reading it through the
+    map (topics present and of the mapped types, decoding, transforms), then what compile
+    needs (topics, marks, the SMCs it extracts)."""
+    c = _Context(path=path, data=data or b"", layout=_layout(data or b""), topic_map=topic_map)
     try:
         c.log = read_ros2_bag(path, topic_map, on_warning=c.warnings.append)
     except SmcError as e:
         c.read_error = _one_line(path, str(e))
     except Exception as e:  # a bag the reader chokes on is a finding, not a traceback
         c.read_error = f"reader failed: {type(e).__name__}: {e}"
-    found = Check("file", "ok", f"{kind}: {_n(len(files), 'file')}, {size} bytes")
-    checks = [found, _check_read(c)]
-    if c.log is not None:
-        checks += [_guarded(n, fn, c) for n, fn, needs in _CHECKS if needs]
-    return _diagnosis(path, checks)
-
-
-def _diagnose_bag(path: Path, data: bytes, topic_map: TopicMap) -> Diagnosis:
-    """A ROS 2 bag: the file, then reading it through the map (topics present and of the
-    mapped types, CDR decoding, transforms), then what compile needs (topics, marks)."""
-    c = _Context(path=path, data=data, layout=_layout(data), topic_map=topic_map)
-    try:
-        c.log = read_ros2_bag(path, topic_map, on_warning=c.warnings.append)
-    except SmcError as e:
-        c.read_error = _one_line(path, str(e))
-    except Exception as e:  # a bag the decoder chokes on is a finding, not a traceback
-        c.read_error = f"reader failed: {type(e).__name__}: {e}"
-    checks = [_check_file(c), _check_crc(c), _check_read(c)]
+    if data is None:
+        files = [path] if path.is_file() else sorted(q for q in path.iterdir() if q.is_file())
+        kind = "ROS 1 bag" if path.is_file() else "rosbag2 directory"
+        size = sum(f.stat().st_size for f in files)
+        checks = [Check("file", "ok", f"{kind}: {_n(len(files), 'file')}, {size} bytes")]
+    else:
+        checks = [_check_file(c), _check_crc(c)]
+    checks.append(_check_read(c))
     if c.log is not None:
         checks += [_guarded(n, fn, c) for n, fn, needs in _CHECKS if needs]
     return _diagnosis(path, checks)
