@@ -25,13 +25,6 @@ from smccli.logs.ros2_bag import TF_TOPICS, open_bag, resolve_bag
 if TYPE_CHECKING:
     from smccli.world.robot import Robot
 
-PLACEHOLDER_SCENE = "FILL_IN"
-"""The draft map's scene: a bag does not say which scene (and robot) it was recorded in."""
-_TOOL = re.compile(r"tool|tcp|ee(_|$)|end_?effector|flange|hand|gripper|grasp", re.IGNORECASE)
-_COMMAND = re.compile(r"target|command|cmd|goal|teleop", re.IGNORECASE)
-_SAMPLE_TF = 2000
-"""TF messages read for the frame list (a robot's whole tree is in its first few)."""
-
 
 @dataclass(frozen=True, slots=True)
 class TopicInfo:
@@ -60,6 +53,10 @@ class BagContents:
     """A joystick topic -> the buttons pressed at least once in the bag."""
     joint_names: dict[str, tuple[str, ...]]
     """A JointState topic -> the joint names its messages carry (every publisher's)."""
+
+
+_SAMPLE_TF = 2000
+"""TF messages read for the frame list (a robot's whole tree is in its first few)."""
 
 
 def bag_contents(path: str | Path) -> BagContents:
@@ -118,6 +115,13 @@ def _detail(msg: Any) -> str:
 
 
 # --- the draft map --------------------------------------------------------------------------
+
+PLACEHOLDER_SCENE = "FILL_IN"
+"""The draft map's scene: a bag does not say which scene (and robot) it was recorded in."""
+_TOOL = re.compile(r"tool|tcp|ee(_|$)|end_?effector|flange|hand|gripper|grasp", re.IGNORECASE)
+"""A TF frame named like a robot's tool."""
+_COMMAND = re.compile(r"target|command|cmd|goal|teleop", re.IGNORECASE)
+"""A pose topic named like a teleoperation command, not a measurement."""
 
 
 def _of(c: BagContents, *types: str) -> list[TopicInfo]:
