@@ -29,7 +29,7 @@ import multiprocessing as mp  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable, Iterator, Sequence  # noqa: E402
-from dataclasses import asdict, dataclass  # noqa: E402
+from dataclasses import asdict, dataclass, field  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
@@ -103,6 +103,8 @@ class TrialResult:
     exact floats (a rerun must give the same bits: :meth:`repeatable`)."""
     final_poses: dict[str, list[float]]
     """Object [x, y, z, yaw] at the end (evaluation)."""
+    criteria: list[list[Any]] = field(default_factory=list)
+    """Every success condition tried at the leaf: [task, what it found, whether it held]."""
 
     def repeatable(self) -> dict[str, Any]:
         """Every field but the wall-clock timings: what a rerun of the campaign with the
@@ -205,6 +207,7 @@ def run_trial(
             for d in r.decisions
         ],
         final_poses=r.final_poses,
+        criteria=[list(c) for c in r.criteria],
     )
 
 

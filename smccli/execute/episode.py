@@ -71,6 +71,8 @@ class EpisodeResult:
     manipulated: str | None = None
     """The object the task moves (from the success criterion), for distance bands."""
     final_poses: dict[str, list[float]] = field(default_factory=dict)
+    criteria: tuple[tuple[str, str, bool], ...] = ()
+    """Every success condition tried at the leaf: (task, what it found, whether it held)."""
     """Object [x, y, z, yaw] at the end (evaluation)."""
     output: Path | None = None
     """The replay log written, if any."""
@@ -321,6 +323,7 @@ def episode(
         wall_time=time.perf_counter() - wall0,
         manipulated=verdict.manipulated,
         final_poses=verdict.final_poses,
+        criteria=verdict.criteria,
         output=None if output is None else Path(output),
         taught=taught,
         speed=speed,

@@ -88,6 +88,8 @@ class Verdict:
     """The object the task moves (:func:`manipulated_object`)."""
     final_poses: dict[str, list[float]]
     """Object [x, y, z, yaw] at the end [m, rad]."""
+    criteria: tuple[tuple[str, str, bool], ...] = ()
+    """Every success condition tried at a leaf: (task, what it found, whether it held)."""
 
 
 def score(
@@ -116,8 +118,10 @@ def score(
         final[ROBOT_KEY] = [float(x), float(y), 0.0, float(yaw)]
     obj = manipulated_object(scene, layout, final)
     ok = False
+    criteria: tuple[tuple[str, str, bool], ...] = ()
     if outcome == "success":
         criterion = sim.success()
+        criteria = criterion.criteria
         ok = bool(criterion)
         reason = criterion.reason
         if collisions:
@@ -134,13 +138,13 @@ def score(
             outcome, reason = "handle_slipped", f"handle slipped: {'; '.join(slips)}; {reason}"
         elif closed and outcome not in ("collision", *CONTROL_OUTCOMES[1:]):
             outcome, reason = "door_not_opened", f"{', '.join(closed)} closed; {reason}"
-    return Verdict(outcome=outcome, success=ok, reason=reason, manipulated=obj, final_poses=final)
+    return Verdict(outcome, ok, reason, obj, final, criteria)
 
 
 def manipulated_object(scene: Scene, layout: Layout, final: dict[str, list[float]]) -> str | None:
     """The object the task moves: of the success criteria's objects, the one that moved
     most (the first one when none moved)."""
-    names = [c.object for crit in scene.success for c in crit.any_of if c.object in layout]
+    names = [c.object for crit in scene.success for c in crit.conditions() if c.object in layout]
     if not names:
         return None
     moved = [
@@ -158,7 +162,7 @@ def classify_base_failure(scene: Scene, sim: Sim, final: Sequence[float]) -> str
         scene.place(c.target)
         for crit in scene.success
         if crit.variant is None or sim.shows(crit.variant)
-        for c in crit.any_of
+        for c in crit.conditions()
         if c.relation == "at"
     ]
     here = scene.region_of(final[0], final[1])
@@ -191,7 +195,7 @@ def classify_failure(
     opens = [a for a in actions if a.event == "open"]
     if any(a.opening_before < EMPTY_GRIP for a in opens):
         return "object_dropped"
-    targets = [c.target for crit in scene.success for c in crit.any_of if c.object == obj]
+    targets = [c.target for crit in scene.success for c in crit.conditions() if c.object == obj]
     near = min(
         (
             math.dist(final[obj][:2], final[t][:2]) - scene.object(t).footprint_radius

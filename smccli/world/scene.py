@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -116,19 +116,45 @@ class StartSpec:
     range_yaw: tuple[float, float]
 
 
+GROUPS = ("all_of", "any_of", "none_of")
+"""How a group combines its items: every one holds, at least one, none."""
+
+
+@dataclass(frozen=True, slots=True)
+class Group:
+    """Conditions combined (nestable): ``all_of`` every item holds, ``any_of`` at least
+    one, ``none_of`` none."""
+
+    kind: str
+    """One of :data:`GROUPS`."""
+    items: tuple[Condition | Group, ...]
+
+    def conditions(self, negated: bool = False) -> Iterator[Condition]:
+        """The conditions the task makes hold (``negated``: those it must not)."""
+        for item in self.items:
+            inner = negated != (self.kind == "none_of")
+            if isinstance(item, Group):
+                yield from item.conditions(inner)
+            elif not inner:
+                yield item
+
+
 @dataclass(frozen=True, slots=True)
 class SuccessCriterion:
-    """A task's success: any ``any_of`` condition holds and no ``none_of`` condition holds."""
+    """A task's success: every key of its criterion holds, ``all_of`` (every item),
+    ``any_of`` (at least one) and ``none_of`` (none), items nestable."""
 
     task: str
     """Task name, e.g. ``cube_on_green``."""
-    any_of: tuple[Condition, ...]
-    """At least one of these must hold."""
-    none_of: tuple[Condition, ...] = ()
-    """None of these may hold (e.g. the heavy object in the light bin)."""
+    rule: Group
+    """The criterion: ``all_of`` its keys' groups."""
     variant: str | None = None
     """The criterion only counts in layouts of this variant (the arrow the robot was
     shown); None: in every layout."""
+
+    def conditions(self) -> tuple[Condition, ...]:
+        """The conditions the task makes hold (not those of a ``none_of``), in file order."""
+        return tuple(self.rule.conditions())
 
 
 @dataclass(frozen=True, slots=True)
@@ -490,40 +516,59 @@ def _parse(
     variants = [str(v) for v in (raw.get("variants") or {})]
     success = []
     for task, crit in (raw.get("success") or {}).items():
-        conds: dict[str, tuple[Condition, ...]] = {}
         variant = crit.get("variant")
         if variant is not None and variant not in variants:
             raise SceneError(
                 f"{_at(yaml_text, where, ('success', task, 'variant'))}: no variant "
                 f"{variant!r} (variants: {', '.join(variants) or 'none'})"
             )
-        for key in ("any_of", "none_of"):
-            items = []
-            for j, c in enumerate(crit.get(key) or ()):
-                if "robot_at" in c:
-                    if c["robot_at"] not in places:
-                        raise SceneError(
-                            f"{_at(yaml_text, where, ('success', task, key, j, 'robot_at'))}: "
-                            f"no place {c['robot_at']!r} (places: {', '.join(places) or 'none'})"
-                        )
-                    tol = (
-                        float(c.get("position_tolerance", 0.1)),
-                        math.radians(float(c.get("yaw_tolerance_deg", 10.0))),
-                    )
-                    items.append(Condition(ROBOT_KEY, "at", str(c["robot_at"]), tol))
-                    continue
-                for role in ("object", "target"):
-                    if c[role] not in names:
-                        raise SceneError(
-                            f"{_at(yaml_text, where, ('success', task, key, j, role))}: "
-                            f"no object {c[role]!r} (objects: {', '.join(names)})"
-                        )
-                items.append(Condition(str(c["object"]), str(c["relation"]), str(c["target"])))
-            conds[key] = tuple(items)
-        success.append(
-            SuccessCriterion(str(task), conds["any_of"], conds["none_of"], variant=variant)
-        )
+        groups = []
+        for key in GROUPS:
+            if key in crit:
+                at = ("success", task, key)
+                groups.append(_group(key, crit[key], at, yaml_text, where, places, names))
+        success.append(SuccessCriterion(str(task), Group("all_of", tuple(groups)), variant))
     return tuple(objects), camera, scale, tuple(success)
+
+
+def _group(
+    kind: str,
+    raw: Sequence[Mapping[str, Any]],
+    at: KeyPath,
+    yaml_text: str,
+    where: str,
+    places: Mapping[str, Any],
+    names: Sequence[str],
+) -> Group:
+    """A success criterion's group ``kind`` of conditions and nested groups, checked
+    against the scene's places and objects (SceneError naming the key and line)."""
+    items: list[Condition | Group] = []
+    for j, c in enumerate(raw):
+        here = (*at, j)
+        nested = [k for k in GROUPS if k in c]
+        if nested:
+            k = nested[0]
+            items.append(_group(k, c[k], (*here, k), yaml_text, where, places, names))
+        elif "robot_at" in c:
+            if c["robot_at"] not in places:
+                raise SceneError(
+                    f"{_at(yaml_text, where, (*here, 'robot_at'))}: "
+                    f"no place {c['robot_at']!r} (places: {', '.join(places) or 'none'})"
+                )
+            tol = (
+                float(c.get("position_tolerance", 0.1)),
+                math.radians(float(c.get("yaw_tolerance_deg", 10.0))),
+            )
+            items.append(Condition(ROBOT_KEY, "at", str(c["robot_at"]), tol))
+        else:
+            for role in ("object", "target"):
+                if c[role] not in names:
+                    raise SceneError(
+                        f"{_at(yaml_text, where, (*here, role))}: "
+                        f"no object {c[role]!r} (objects: {', '.join(names)})"
+                    )
+            items.append(Condition(str(c["object"]), str(c["relation"]), str(c["target"])))
+    return Group(kind, tuple(items))
 
 
 def _ranges(

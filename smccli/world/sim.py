@@ -29,7 +29,15 @@ from smccli.world.lidar import Lidar, LidarReading
 from smccli.world.noise import NoisySensors
 from smccli.world.robot import robot_geoms
 from smccli.world.robot_model import RobotModel
-from smccli.world.scene import HIDDEN_GROUP, ROBOT_KEY, Condition, Layout, ObjectSpec, Scene
+from smccli.world.scene import (
+    HIDDEN_GROUP,
+    ROBOT_KEY,
+    Condition,
+    Group,
+    Layout,
+    ObjectSpec,
+    Scene,
+)
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
 
 ON_TOP_TOL = 0.015
@@ -60,6 +68,8 @@ class Success:
     """Whether a task's criterion holds."""
     reason: str
     """Which task and condition held, or why none did."""
+    criteria: tuple[tuple[str, str, bool], ...] = ()
+    """Every condition tried: (task, what it found, whether it held)."""
 
     def __bool__(self) -> bool:
         return self.ok
@@ -724,18 +734,34 @@ class Sim:
         if not crits:
             valid = ", ".join(c.task for c in self.scene.success)
             raise SceneError(f"scene {self.scene.name}: no task {task!r} (tasks: {valid})")
-        reasons = []
+        reasons, details = [], []
         for crit in crits:
-            held = [self.holds(c) for c in crit.any_of]
-            bad = [self.holds(c) for c in crit.none_of]
-            if any(ok for ok, _ in bad):
-                reasons.append(f"{crit.task}: " + "; ".join(w for ok, w in bad if ok))
-                continue
-            hit = [w for ok, w in held if ok]
-            if hit:
-                return Success(True, f"{crit.task}: {hit[0]}")
-            reasons.append(f"{crit.task}: " + "; ".join(w for _, w in held))
-        return Success(False, " | ".join(reasons))
+            ok, results = self._holds_group(crit.rule)
+            details += [(crit.task, text, held) for text, held, _ in results]
+            if ok:
+                # What made it hold: every all_of condition, the first any_of one that held.
+                shown = _explain(results, True)
+                return Success(True, f"{crit.task}: {'; '.join(shown)}", tuple(details))
+            reasons.append(f"{crit.task}: " + "; ".join(_explain(results, False)))
+        return Success(False, " | ".join(reasons), tuple(details))
+
+    def _holds_group(self, group: Group) -> tuple[bool, list[tuple[str, bool, str]]]:
+        """Whether ``group`` holds, and each of its conditions' (text, held, the kind of
+        the group right above it), in file order."""
+        oks, results = [], []
+        for item in group.items:
+            if isinstance(item, Group):
+                ok, inner = self._holds_group(item)
+            else:
+                ok, text = self.holds(item)
+                inner = [(text, ok, group.kind)]
+            oks.append(ok)
+            results += inner
+        if group.kind == "all_of":
+            return all(oks), results
+        if group.kind == "any_of":
+            return any(oks), results
+        return not any(oks), results
 
     def shows(self, variant: str) -> bool:
         """Whether the layout shows every object of ``variant``."""
@@ -794,3 +820,19 @@ def _in_footprint(tgt: ObjectSpec, lx: float, ly: float, margin: float) -> bool:
     if tgt.shape == "cylinder":
         return math.hypot(lx, ly) < tgt.size[0] / 2 - margin
     return abs(lx) < tgt.size[0] / 2 - margin and abs(ly) < tgt.size[1] / 2 - margin
+
+
+def _explain(results: list[tuple[str, bool, str]], ok: bool) -> list[str]:
+    """The conditions that say why a criterion held (``ok``: every one under an all_of,
+    the first that held under an any_of) or failed (a none_of condition that held; else
+    every one that did not)."""
+    if ok:
+        shown = [t for t, held, kind in results if held and kind == "all_of"]
+        first = next((t for t, held, kind in results if held and kind == "any_of"), None)
+        return shown + ([first] if first else [])
+    bad = [t for t, held, kind in results if held and kind == "none_of"]
+    if bad:
+        return bad
+    return [t for t, held, kind in results if kind != "none_of" and not held] or [
+        t for t, _, _ in results
+    ]
