@@ -234,6 +234,10 @@ def compile_cmd(
             "per log; 1: none). The tree is the same.",
         ),
     ] = None,
+    strict: Annotated[
+        bool,
+        typer.Option(help="Refuse a demonstration that failed its task (default: a warning)."),
+    ] = False,
 ) -> None:
     """Segment logs, extract SMCs and merge them into a versioned tree.json."""
     from smccli.learn.compile import compile_logs
@@ -268,6 +272,7 @@ def compile_cmd(
             on_warning=warn,
             topic_map=topic_map,
             workers=workers,
+            strict=strict,
         )
         progress.update(task, completed=len(logs))
     for p in result.skipped:

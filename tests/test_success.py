@@ -144,8 +144,8 @@ SCRIPT_STEPS = {
 }
 
 
-def _tree(folder: Path, scene: Path, parts: list[str]) -> Path:
-    """The tree of one scripted demonstration doing ``parts`` in turn."""
+def _record(folder: Path, scene: Path, parts: list[str]) -> Path:
+    """One scripted demonstration doing ``parts`` in turn."""
     script = folder / f"{'_'.join(parts)}.yaml"
     steps = [s for p in parts for s in SCRIPT_STEPS[p]]
     script.write_text(
@@ -153,8 +153,13 @@ def _tree(folder: Path, scene: Path, parts: list[str]) -> Path:
     )
     log = folder / f"{'_'.join(parts)}.mcap"
     record(RecordConfig(scene=str(scene), script=script, output=log))
+    return log
+
+
+def _tree(folder: Path, scene: Path, parts: list[str]) -> Path:
+    """The tree of one scripted demonstration doing ``parts`` in turn."""
     tree = folder / f"{'_'.join(parts)}.json"
-    compile_logs([log], tree)
+    compile_logs([_record(folder, scene, parts)], tree)
     return tree
 
 
@@ -173,3 +178,39 @@ def test_all_of_gives_nothing_to_half_a_task(tmp_path: Path) -> None:
         assert all(len(r.criteria) == 2 for r in results if r.outcome != "no_contingent_smc")
     assert rates["cube"] == 0.0, rates
     assert rates["cube_pyramid"] >= 0.95, rates
+
+
+# --- checked demonstrations -------------------------------------------------------------------
+
+
+def test_a_demonstration_that_fails_its_task_is_marked_shown_warned_and_refused(
+    tmp_path: Path,
+) -> None:
+    """The recorder checks the task at the end (the simulator's truth, as evaluation does)
+    and writes it in smc_end; doctor shows it, compile warns, compile --strict refuses."""
+    from conftest import smc
+
+    from smccli.errors import LogError
+    from smccli.learn.doctor import diagnose
+    from smccli.logs import read_log
+
+    scene = two_object_scene(tmp_path, {"both": {"all_of": [CUBE, PYRAMID]}})
+    whole, half = _record(tmp_path, scene, ["cube", "pyramid"]), _record(tmp_path, scene, ["cube"])
+    done = read_log(whole).task
+    assert done is not None and done["success"] is True
+    assert [held for _, _, held in done["criteria"]] == [True, True]
+    failed = read_log(half).task
+    assert failed is not None and failed["success"] is False and "grey_pyramid" in failed["reason"]
+
+    end = {c.name: c for c in diagnose(half).checks}["end"]
+    assert end.status == "warn" and "failed its task" in end.detail
+    assert {c.name: c for c in diagnose(whole).checks}["end"].status == "ok"
+
+    warnings: list[str] = []
+    compile_logs([half], tmp_path / "t.json", on_warning=warnings.append)
+    assert any("failed its task" in w and "--strict" in w for w in warnings), warnings
+    with pytest.raises(LogError, match="failed its task.*--strict refuses it"):
+        compile_logs([half], tmp_path / "strict.json", strict=True)
+    proc = smc("compile", half, "--strict", "-o", tmp_path / "cli.json")
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert not (tmp_path / "cli.json").exists()

@@ -273,6 +273,8 @@ class _Job:
     extracted, it will be skipped."""
     topic_map: TopicMap | None
     """Read a ROS 2 bag through this map; None: an MCAP log."""
+    strict: bool = False
+    """Refuse a demonstration its recorder found had failed its task (else a warning)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -319,6 +321,12 @@ def _read(job: _Job) -> _Read:
         missing = sorted(
             required_topics(log, scene) - {t for t, n in log.topic_counts.items() if n > 0}
         )
+        task = log.task
+        if task is not None and task["success"] is False:
+            what = f"{path}: the demonstration failed its task ({task.get('reason', '?')})"
+            if job.strict:
+                raise LogError(f"{what}; compile --strict refuses it")
+            warnings.append(f"{what}; its SMCs teach what it did (--strict refuses it)")
         if missing:
             scene_name = log.metadata.get("scene", "?")
             if job.topic_map is not None:  # say it in the bag's terms: the map's role
@@ -426,6 +434,7 @@ def compile_logs(
     on_warning: Callable[[str], None] | None = None,
     topic_map: TopicMap | None = None,
     workers: int | None = None,
+    strict: bool = False,
 ) -> CompileResult:
     """Add the logs to the tree at ``out`` (created if absent) and write it atomically.
 
@@ -438,6 +447,9 @@ def compile_logs(
     read the logs and extract their chains in parallel; the tree takes them in the order
     given (Algorithm 1 is sequential), so the tree, the warnings and the first error are
     those of a one-log-at-a-time compile.
+
+    A demonstration whose recorder found it failed its task (the log's ``smc_end``) is
+    compiled with a warning, or refused with ``strict``.
     """
     paths = [Path(p) for p in logs]
     n_workers = default_workers(len(paths)) if workers is None else workers
@@ -486,6 +498,7 @@ def compile_logs(
                 segment_mode,
                 frozenset(known) | {c.sha256 for c in added},
                 topic_map,
+                strict,
             )
 
         futures: list[Future[_Read]] = []

@@ -34,7 +34,7 @@ from mcap.stream_reader import CRCValidationError, get_chunk_data_stream
 from smccli.errors import LogError, OutputError, SmcError
 from smccli.logs import topics as tp
 from smccli.logs.decode import decode_points
-from smccli.logs.log import Log
+from smccli.logs.log import Log, parse_task
 from smccli.logs.reader import read_log
 from smccli.logs.records import RawLog, read_bytes, scan_records
 from smccli.logs.rewrite import copy_log
@@ -355,8 +355,14 @@ def _check_end(c: _Context) -> Check:
         return Check("end", "ok", f"no {tp.END_METADATA_NAME!r} record ({why})")
     state = end.get("end", "")
     last = f", last message at {end['last_log_time_s']} s" if "last_log_time_s" in end else ""
+    task = parse_task(end)
+    if state == "complete" and task is not None and task["success"] is False:
+        why = task.get("reason", "?")
+        failed = f"the demonstration failed its task: {why}"
+        return Check("end", "warn", f"recording complete{last}; {failed}")
     if state == "complete":
-        return Check("end", "ok", f"recording complete{last}")
+        done = f"; task achieved: {task.get('reason', '')}" if task and task["success"] else ""
+        return Check("end", "ok", f"recording complete{last}{done}")
     if state == "interrupted":
         reason = f" by {end['reason']}" if end.get("reason") else ""
         return Check("end", "warn", f"recording interrupted{reason}{last}")

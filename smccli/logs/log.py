@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -144,6 +146,25 @@ class Log:
         return self.camera.frame(i) if self.camera is not None else self.frames[i]
 
     @property
+    def task(self) -> dict[str, Any] | None:
+        """What the recorder found at the end of the demonstration (:func:`parse_task`)."""
+        return parse_task(self.end)
+
+    @property
     def interrupted(self) -> bool:
         """Whether the recording stopped before its operator finished (signal, repair)."""
         return self.end.get("end") == "interrupted"
+
+
+def parse_task(end: Mapping[str, str]) -> dict[str, Any] | None:
+    """The ``task`` of an ``smc_end`` record: what the recorder found at the end of the
+    demonstration, ``{success, reason, criteria}`` (success None: the scene defines no
+    task); None when the record does not say (a log cut short, an older recorder, a bag)."""
+    raw = end.get("task")
+    if not raw:
+        return None
+    try:
+        task = json.loads(raw)
+    except json.JSONDecodeError:
+        return None
+    return task if isinstance(task, dict) and "success" in task else None

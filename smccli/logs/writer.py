@@ -125,11 +125,15 @@ class LogWriter:
         else:
             self.abort()
 
-    def close(self, *, interrupted: str | None = None) -> Path:
+    def close(
+        self, *, interrupted: str | None = None, end_fields: dict[str, str] | None = None
+    ) -> Path:
         """Finish the file (summary, index) and rename it to ``path`` atomically.
 
         A metadata record ``smc_end`` says how the recording ended: ``end`` is ``complete``,
-        or ``interrupted`` with ``reason`` (e.g. ``SIGINT``) when ``interrupted`` is given.
+        or ``interrupted`` with ``reason`` (e.g. ``SIGINT``) when ``interrupted`` is given;
+        ``end_fields`` adds to it (the recorder's ``task``: whether the demonstration
+        achieved it).
         """
         if self._closed:
             return self.path
@@ -140,6 +144,7 @@ class LogWriter:
             if interrupted is not None:
                 end["reason"] = interrupted
             end["last_log_time_s"] = f"{self._max_t_ns / 1e9:.3f}"
+            end.update(end_fields or {})
             self._mcap.add_metadata(tp.END_METADATA_NAME, end)
             self._mcap.finish()
             self._file.flush()

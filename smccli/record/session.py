@@ -10,6 +10,7 @@ finish, so a crash loses at most the last second and never leaves a half-written
 
 from __future__ import annotations
 
+import json
 import signal
 import threading
 import time
@@ -285,8 +286,28 @@ def record_session(
         writer.close(interrupted=f"error: {exc.__class__.__name__}")
         raise
     interrupted = stop[0] if stop else None
-    writer.close(interrupted=interrupted)
+    writer.close(interrupted=interrupted, end_fields={"task": task_outcome(sim)})
     return marks, interrupted
+
+
+TASK_SETTLE = 0.5
+"""Sim time the scene settles after a demonstration before its task is checked [s]."""
+
+
+def task_outcome(sim: Sim) -> str:
+    """Whether the demonstration achieved its task, as evaluation judges an episode (the
+    simulator's truth, after the scene settles): JSON ``{success, reason, criteria}`` for
+    the log's ``smc_end`` record. Compile reads only this verdict (a warning, or a refusal
+    with ``--strict``), never the truth itself."""
+    if not sim.scene.success:
+        return json.dumps({"success": None, "reason": "the scene defines no task"})
+    try:
+        sim.settle(TASK_SETTLE)
+        s = sim.success()
+    except Exception as exc:  # the check must never cost the recording its end record
+        return json.dumps({"success": None, "reason": f"not checked: {exc}"})
+    criteria = [list(c) for c in s.criteria]
+    return json.dumps({"success": s.ok, "reason": s.reason, "criteria": criteria})
 
 
 def _session(
