@@ -214,3 +214,35 @@ def test_a_demonstration_that_fails_its_task_is_marked_shown_warned_and_refused(
     proc = smc("compile", half, "--strict", "-o", tmp_path / "cli.json")
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert not (tmp_path / "cli.json").exists()
+
+
+# --- scenes travel --------------------------------------------------------------------------
+
+
+def test_a_tree_runs_where_it_was_taught_without_its_scene_files(tmp_path: Path) -> None:
+    """A script names its scene relative to its own folder; the tree keeps the scene it
+    was taught in, so replay needs no --scene, even once the scene's folder is gone; a
+    changed scene of the same name gets a note."""
+    from conftest import smc
+
+    from smccli.execute.episode import resolve, scene_note
+
+    scene = two_object_scene(tmp_path / "my_cell", {"both": {"all_of": [CUBE, PYRAMID]}})
+    script = tmp_path / "my_cell" / "demo.yaml"
+    steps = SCRIPT_STEPS["cube"] + SCRIPT_STEPS["pyramid"]
+    script.write_text(yaml.safe_dump({"scene": "scene.yaml", "speed": 0.15, "steps": steps}))
+    log, tree = tmp_path / "demo.mcap", tmp_path / "tree.json"
+    record(RecordConfig(scene=str(scene), script=script, output=log))  # run from elsewhere
+    compile_logs([log], tree)
+    taught = load_scene(scene)
+    shutil.move(tmp_path / "my_cell", tmp_path / "moved")
+    _, sc = resolve(tree, None)
+    assert sc.name == "two_objects" and sc.digest == taught.digest
+    proc = smc("replay", tree, "--seed", "1", "--report", tmp_path / "report.json")
+    assert proc.returncode in (0, 1) and "error" not in proc.stderr, proc.stderr
+    assert "outcome" in (tmp_path / "report.json").read_text()
+    # The same name, another scene: the note says so.
+    changed = two_object_scene(tmp_path / "other", {"either": {"any_of": [CUBE, PYRAMID]}})
+    tree_obj, other = resolve(tree, changed)
+    note = scene_note(tree_obj, other)
+    assert note is not None and "another version of scene 'two_objects'" in note

@@ -37,6 +37,7 @@ from smccli.world.scene import (
     builtin_names,
     load_scene,
     robot_identity,
+    scene_of_log,
     sensor_identity,
 )
 from smccli.world.sensors import PoiCommand
@@ -137,17 +138,30 @@ def resolve(tree_path: Path | Tree, scene: str | Path | Scene | None) -> tuple[T
     where = "tree" if isinstance(tree_path, Tree) else str(tree_path)
     if not tree.edges:
         raise TreeError(f"{where}: the tree holds no SMC (compile a demonstration first)")
-    tree_scene = str(tree.scene.get("name", "")) if tree.scene else ""
     if scene is None:
-        if tree_scene not in builtin_names():
-            raise SceneError(
-                f"{where}: built for scene {tree_scene!r}, which is not built in; pass --scene PATH"
-            )
-        sc = load_scene(tree_scene)
+        sc = taught_scene(tree, where)
     else:
         sc = scene if isinstance(scene, Scene) else load_scene(scene)
     check_fits(tree, sc, where)
     return tree, sc
+
+
+def taught_scene(tree: Tree, where: str = "tree") -> Scene:
+    """The scene the tree was taught in: the built-in one of its name when it is the same
+    (digest), else the files the tree recorded from its first log (a scene of one's own,
+    or a built-in one changed); SceneError when it has neither."""
+    name = str(tree.scene.get("name", "")) if tree.scene else ""
+    files = tree.scene.get("files") if tree.scene else None
+    if name in builtin_names():
+        builtin = load_scene(name)
+        if not files or builtin.digest == tree.scene.get("digest"):
+            return builtin
+    if files:
+        return scene_of_log({k: str(v).encode() for k, v in files.items()}, where)
+    raise SceneError(
+        f"{where}: built for scene {name!r}, which is not built in and which the tree does not "
+        "record (compiled before trees kept their scene); pass --scene PATH"
+    )
 
 
 def check_fits(tree: Tree, scene: Scene, where: str = "tree") -> None:
@@ -196,6 +210,12 @@ def scene_note(tree: Tree, scene: Scene) -> str | None:
         return (
             f"taught in scene {tree_scene!r}, running in {scene.name!r} "
             f"(same robot {scene.robot.name!r} and sensors)"
+        )
+    taught = str(tree.scene.get("digest", "")) if tree.scene else ""
+    if taught and scene.digest != taught:
+        return (
+            f"taught in another version of scene {tree_scene!r} (digest {taught[:19]}), "
+            f"running in {scene.digest[:19]} (same robot {scene.robot.name!r} and sensors)"
         )
     return None
 

@@ -295,6 +295,9 @@ class _Read:
     robot: dict[str, str] = field(default_factory=dict)
     """:func:`robot_identity`."""
     sensors: dict[str, Any] = field(default_factory=dict)
+    scene_files: dict[str, str] = field(default_factory=dict)
+    """The scene's files as the log carries them (``scene.yaml``, ``scene.xml``,
+    ``robot.yaml``): the tree keeps its first log's, to run where it was taught."""
     """:func:`sensor_identity`."""
     perception: bool = False
     """The scene has perception settings (scene.yaml ``perception``)."""
@@ -338,7 +341,10 @@ def _read(job: _Job) -> _Read:
             raise LogError(f"{path}: topic {missing[0]} missing (scene {scene_name} needs it)")
     except SmcError as e:
         return _Read(path, tuple(warnings), error=e)
-    read = _Read(path, tuple(warnings), sha256=log.sha256, metadata=dict(log.metadata))
+    files = {n: bytes(v).decode() for n, v in log.attachments.items() if n in SCENE_FILES}
+    read = _Read(
+        path, tuple(warnings), sha256=log.sha256, metadata=dict(log.metadata), scene_files=files
+    )
     if log.sha256 in job.known:
         return read
     try:
@@ -361,6 +367,8 @@ def _read(job: _Job) -> _Read:
     return replace(read, params=params, chain=chain)
 
 
+SCENE_FILES = ("scene.yaml", "scene.xml", "robot.yaml")
+"""The attachments that hold a log's scene (:func:`smccli.world.scene.scene_of_log`)."""
 PARALLEL_MIN_LOGS = 6
 """Fewer logs than this compile in process by default: starting workers costs about as
 much as reading five logs (measured: 2 logs take 1.6 s in workers, 0.8 s in process)."""
@@ -575,6 +583,7 @@ def compile_logs(
                         "digest": r.metadata.get("scene_digest", ""),
                         "log": r.sha256,
                         "sensors": r.sensors,
+                        "files": r.scene_files,
                     },
                     robot=robot,
                 )

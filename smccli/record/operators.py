@@ -248,7 +248,7 @@ class ScriptOperator:
     """
 
     def __init__(self, script: Script, sim: Sim, seed: int = 0) -> None:
-        if script.scene not in (sim.scene.name, str(sim.scene.yaml_path)):
+        if not _names_scene(script, sim.scene):
             raise ScriptError(
                 f"{script.source}: written for scene {script.scene!r}, "
                 f"but the simulation runs {sim.scene.name!r}"
@@ -486,6 +486,21 @@ def run_script(script: Script, sim: Sim, seed: int = 0, *, max_time: float = 600
             return
         if sim.t > max_time:
             raise ScriptError(f"{script.source}: still running after {max_time:.0f} s")
+
+
+def _names_scene(script: Script, scene: Scene) -> bool:
+    """Whether the script's ``scene:`` is ``scene``: its name, or its scene.yaml, a relative
+    path read from the script's folder (as the script's author wrote it)."""
+    if script.scene == scene.name:
+        return True
+    if scene.yaml_path is None:
+        return False
+    given = Path(script.scene)
+    if not given.is_absolute() and script.source:
+        given = Path(script.source).parent / given
+    return given.resolve() == Path(scene.yaml_path).resolve() or script.scene == str(
+        scene.yaml_path
+    )
 
 
 def script_layout(scene: Scene, script: Script, rng: np.random.Generator | None = None) -> Layout:
