@@ -246,3 +246,20 @@ def test_a_tree_runs_where_it_was_taught_without_its_scene_files(tmp_path: Path)
     tree_obj, other = resolve(tree, changed)
     note = scene_note(tree_obj, other)
     assert note is not None and "another version of scene 'two_objects'" in note
+
+
+@pytest.mark.parametrize("name", ["rooms", "loco_manip", "weigh_sort"])
+def test_what_a_check_reports_is_plain_json(name: str) -> None:
+    """Every condition's result is a JSON boolean (a base's `at` compares numpy floats):
+    the recorder writes them into the log's end record."""
+    import json
+
+    scene = load_scene(name)
+    sim = Sim(scene)
+    try:
+        sim.reset()
+        result = sim.success()
+        assert result.criteria and all(type(held) is bool for _, _, held in result.criteria)
+        json.dumps([list(c) for c in result.criteria])
+    finally:
+        sim.close()

@@ -307,7 +307,7 @@ def task_outcome(sim: Sim) -> str:
     except Exception as exc:  # the check must never cost the recording its end record
         return json.dumps({"success": None, "reason": f"not checked: {exc}"})
     criteria = [list(c) for c in s.criteria]
-    return json.dumps({"success": s.ok, "reason": s.reason, "criteria": criteria})
+    return json.dumps({"success": bool(s.ok), "reason": s.reason, "criteria": criteria})
 
 
 def _session(

@@ -753,7 +753,8 @@ class Sim:
             if isinstance(item, Group):
                 ok, inner = self._holds_group(item)
             else:
-                ok, text = self.holds(item)
+                held, text = self.holds(item)
+                ok = bool(held)  # numpy's bool from a comparison is no JSON boolean
                 inner = [(text, ok, group.kind)]
             oks.append(ok)
             results += inner
