@@ -44,7 +44,7 @@ from smccli.learn.tree import FORMAT, ROOT, Tree, digest, insert_chain, load_tre
 from smccli.logs import Log, read_log
 from smccli.logs import topics as tp
 from smccli.logs.robot import geometry_at, robot_model_of
-from smccli.logs.ros2_bag import ROLES, TopicMap, read_ros2_bag
+from smccli.logs.ros2_bag import ROLE_OF, ROLES, TopicMap, read_ros2_bag
 from smccli.outputs import ExclusiveLock, check_output
 from smccli.perception import Cluster, clusters_from_frame, salient_cluster, scale_reading
 from smccli.perception.params import scene_perception
@@ -333,7 +333,7 @@ def _read(job: _Job) -> _Read:
         if missing:
             scene_name = log.metadata.get("scene", "?")
             if job.topic_map is not None:  # say it in the bag's terms: the map's role
-                role = next((r for r, (native, _) in ROLES.items() if native == missing[0]), "?")
+                role = ROLE_OF.get(missing[0], "?")
                 raise LogError(
                     f"{path}: the topic map gives no {role} topic (scene {scene_name} needs "
                     f"one: {' or '.join(ROLES[role][1]) if role in ROLES else missing[0]})"

@@ -38,7 +38,7 @@ from smccli.logs.log import Log, parse_task
 from smccli.logs.reader import read_log
 from smccli.logs.records import RawLog, read_bytes, scan_records
 from smccli.logs.rewrite import copy_log
-from smccli.logs.ros2_bag import ROLES, TopicMap, read_ros2_bag, resolve_bag
+from smccli.logs.ros2_bag import ROLE_OF, ROLES, TopicMap, read_ros2_bag, resolve_bag
 from smccli.outputs import check_output, write_atomic
 
 Status = Literal["ok", "warn", "error"]
@@ -466,7 +466,7 @@ def _check_topics(c: _Context) -> Check:
         role = {native: r for r, (native, _) in ROLES.items() if r in m.topics}
         role.setdefault(tp.POI, "poi")
         name = {t: m.topics.get(role.get(t, ""), f"the map's {role.get(t, t)}") for t in needed}
-        missing = [f"the map's {ROLES_OF.get(t, t)} topic" for t in missing]
+        missing = [f"the map's {ROLE_OF.get(t, t)} topic" for t in missing]
     else:
         name = {t: t for t in needed}
     if missing:
@@ -478,10 +478,6 @@ def _check_topics(c: _Context) -> Check:
         f"all {len(needed)} topics scene {scene} needs (fewest: {name[low]}, "
         f"{counts[low]} messages)",
     )
-
-
-ROLES_OF = {native: role for role, (native, _) in reversed(ROLES.items())}
-"""A native topic -> the map's role that stands for it (the first role listed)."""
 
 
 def _check_time_order(c: _Context) -> Check:

@@ -52,6 +52,8 @@ ROLES: dict[str, tuple[str, tuple[str, ...]]] = {
     "points": (tp.POINTS, ("sensor_msgs/msg/PointCloud2",)),
 }
 """Map role -> (the native topic it stands for, the ROS 2 types it may hold)."""
+ROLE_OF = {native: role for role, (native, _) in reversed(ROLES.items())}
+"""A native topic -> the map's role that stands for it (the first role listed)."""
 TF_TOPICS = ("/tf", "/tf_static")
 FRAME_MATCH_NS = 20_000_000
 """A depth image belongs to the colour image whose stamp is this close [ns] (20 ms)."""
