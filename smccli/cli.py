@@ -207,6 +207,13 @@ def _print_summary(summary) -> None:
     for topic, (count, rate) in sorted(summary.topics.items()):
         table.add_row(topic, str(count), f"{rate:.1f}")
     out.print(table)
+    task = summary.task or {}
+    if task.get("success") is True:
+        out.print("[green]task achieved[/]")
+    elif task.get("success") is False:
+        warn(f"{summary.path}: the demonstration failed its task ({task.get('reason')})")
+    for warning in summary.warnings:
+        warn(warning)
 
 
 @app.command("compile")

@@ -22,7 +22,9 @@ SMC_ENV = {**os.environ, "COLUMNS": "250", "MUJOCO_GL": os.environ.get("MUJOCO_G
 """The real command's environment: wide tables (rows do not wrap), headless rendering."""
 
 
-def smc(*args: str | Path, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+def smc(
+    *args: str | Path, timeout: float = 300, cwd: Path = REPO
+) -> subprocess.CompletedProcess[str]:
     """Run the real ``smc`` command (``python -m smccli.cli ARGS``) in a subprocess."""
     return subprocess.run(
         [sys.executable, "-m", "smccli.cli", *map(str, args)],
@@ -30,7 +32,7 @@ def smc(*args: str | Path, timeout: float = 300) -> subprocess.CompletedProcess[
         text=True,
         timeout=timeout,
         env=SMC_ENV,
-        cwd=REPO,
+        cwd=cwd,
     )
 
 

@@ -48,6 +48,7 @@ from smccli.logs.ros2_bag import ROLE_OF, ROLES, TopicMap, read_ros2_bag
 from smccli.outputs import ExclusiveLock, check_output
 from smccli.perception import Cluster, clusters_from_frame, salient_cluster, scale_reading
 from smccli.perception.params import scene_perception
+from smccli.perception.workspace import crop_warnings
 from smccli.world.robot import Robot
 from smccli.world.scene import Scene, robot_identity, scene_of_log, sensor_identity
 
@@ -160,6 +161,7 @@ def extract_chain(
         )
     robot = robot_model_of(log)
     has_scale = len(log.weight) > 0
+    cut_faces: set[str] = set()
     smcs: list[Smc] = []
     held = 0.0  # symmetry of the object in the hand: nothing yet
     for k, frag in enumerate(frags):
@@ -167,6 +169,7 @@ def extract_chain(
         if frame is None:
             raise LogError(f"{name}: no camera frame near t={frag.t0:.2f} s")
         clusters = clusters_from_frame(frame, geometry_at(robot, log, frame.t), params.perception)
+        warnings += crop_warnings(name, frame.t, clusters, params.perception, cut_faces)
         poi_end = log.poi[int(np.argmin(np.abs(log.poi_t - frag.t1)))]
         idx = salient_cluster(clusters, poi_end[:3], params.epsilon)
         cluster = None if idx is None else clusters[idx]
@@ -263,8 +266,8 @@ class _Job:
     params: SmcParams
     """The tree's parameters."""
     fresh: bool
-    """The tree is new and holds no log yet: a scene with perception settings brings its
-    own (:func:`scene_params`)."""
+    """The tree is new and holds no log yet: it takes its first log's scene's perception
+    settings (:func:`scene_params`: the scene file's, an arm's crop box from its reach)."""
     overrides: tuple[str, ...]
     """``--set`` assignments."""
     segment_mode: SegmentMode
@@ -299,10 +302,8 @@ class _Read:
     """The scene's files as the log carries them (``scene.yaml``, ``scene.xml``,
     ``robot.yaml``): the tree keeps its first log's, to run where it was taught."""
     """:func:`sensor_identity`."""
-    perception: bool = False
-    """The scene has perception settings (scene.yaml ``perception``)."""
     scene_params: SmcParams | SmcError | None = None
-    """With ``_Job.fresh`` and ``perception``: :func:`scene_params` (or why not)."""
+    """With ``_Job.fresh``: :func:`scene_params` (or why not)."""
     params: SmcParams | None = None
     """What the chain was extracted with; None: not extracted."""
     chain: Chain | SmcError | None = None
@@ -352,9 +353,9 @@ def _read(job: _Job) -> _Read:
         robot, sensors = robot_identity(scene, model), sensor_identity(scene, model)
     except SmcError as e:
         return replace(read, model_error=e)
-    read = replace(read, robot=robot, sensors=sensors, perception=bool(scene.perception))
+    read = replace(read, robot=robot, sensors=sensors)
     params = job.params
-    if job.fresh and scene.perception:
+    if job.fresh:  # the scene's perception settings, an arm's crop box from its reach
         try:
             params = scene_params(scene, job.overrides)
         except SmcError as e:
@@ -542,7 +543,7 @@ def compile_logs(
                     f"{path}: scene {r.metadata.get('scene')!r} differs from the "
                     f"tree's scene {tree.scene.get('name')!r}"
                 )
-            if fresh and not added and r.perception:
+            if fresh and not added:
                 if isinstance(r.scene_params, SmcError):
                     raise r.scene_params
                 assert r.scene_params is not None  # computed for every fresh job

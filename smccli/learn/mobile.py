@@ -26,6 +26,7 @@ from smccli.logs.robot import geometry_at, robot_model_of
 from smccli.perception import clusters_from_frame, salient_cluster
 from smccli.perception.room import room_histogram
 from smccli.perception.scan import Scan2D
+from smccli.perception.workspace import crop_warnings
 from smccli.world.geometry import compose, wrap_yaw
 from smccli.world.lidar import RANGE_MAX as LIDAR_RANGE_MAX
 from smccli.world.lidar import lidar_mount
@@ -135,6 +136,7 @@ def mobile_manipulator_smcs(
     salient object is the cluster nearest the hand where the action ends, within epsilon.
     """
     name = log.path.name
+    cut: set[str] = set()
     if not len(log.base_t):
         raise LogError(
             f"{log.path}: no /robot/base; a mobile manipulator's log needs its base pose"
@@ -195,6 +197,8 @@ def mobile_manipulator_smcs(
             end = hand_world[int(np.argmin(np.abs(log.poi_t - frag.t1)))][:3]
             idx = salient_cluster(clusters, end, params.epsilon)
             cluster = None if idx is None else clusters[idx]
+            if cluster is not None:  # shelves and doors run past a box that rides the base
+                warnings += crop_warnings(name, frame.t, [cluster], params.perception, cut)
         action = action_from_path(t, world, grip, cluster, params, held_symmetry=held)
         action = replace(action, poi="hand")
         if holding:

@@ -20,7 +20,6 @@ pi/2 (square), 0 (round: every rotation), 2 pi (none). The parallel gripper adds
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -30,7 +29,7 @@ from smccli.learn import dmp as dmp_mod
 from smccli.learn.dmp import Dmp
 from smccli.learn.frames import goal_in_object, goal_in_scan, object_yaw
 from smccli.learn.params import SmcParams
-from smccli.perception import Cluster
+from smccli.perception import Cluster, cluster_from_dict, cluster_to_dict
 from smccli.perception.scan import Scan2D, scan_from_dict, scan_to_dict
 from smccli.world.geometry import TWO_PI, rotate_z, wrap
 
@@ -263,41 +262,6 @@ def _to_json(value: Any) -> Any:
     if isinstance(value, tuple):
         return [_to_json(v) for v in value]
     return value
-
-
-def cluster_to_dict(cluster: Cluster) -> dict[str, Any]:
-    """JSON form of a cluster."""
-    return {f.name: _to_json(getattr(cluster, f.name)) for f in dataclasses.fields(cluster)}
-
-
-def _is_number(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
-def cluster_from_dict(data: dict[str, Any]) -> Cluster:
-    """Inverse of :func:`cluster_to_dict`; arrays come back as float arrays.
-
-    TreeError for a value that is not a number (array fields: a list of numbers;
-    ``np.asarray`` would turn the string ``"inf"`` into a float) and for a centroid or
-    extents not of length 3.
-    """
-    from smccli.errors import TreeError
-
-    kwargs: dict[str, Any] = {}
-    for f in dataclasses.fields(Cluster):
-        v = data[f.name]
-        if f.type == "np.ndarray":  # annotations are strings (``from __future__``)
-            if not (isinstance(v, list) and all(_is_number(x) for x in v)):
-                raise TreeError(f"cluster {f.name}: expected a list of numbers")
-            kwargs[f.name] = np.asarray(v, dtype=float)
-        elif _is_number(v):
-            kwargs[f.name] = v
-        else:
-            raise TreeError(f"cluster {f.name}: expected a number")
-    for name, shape in (("centroid", (3,)), ("extents", (3,))):
-        if np.shape(kwargs[name]) != shape:
-            raise TreeError(f"cluster {name}: expected 3 numbers, found {kwargs[name]!r:.60}")
-    return Cluster(**kwargs)
 
 
 def smc_to_dict(smc: Smc) -> tuple[dict[str, Any], dict[str, Any]]:

@@ -34,21 +34,45 @@ def points_from_depth(frame: CameraFrame, max_depth: float = 5.0) -> tuple[np.nd
     return points, colors
 
 
+def in_crop_frame(
+    points: np.ndarray, params: PerceptionParams, base: np.ndarray | None = None
+) -> np.ndarray:
+    """``points`` (n, 3) in the crop box's frame: the world's, or with ``params.crop_frame
+    == "base"`` that of the base at ``base`` ``[x, y, yaw]`` (odometry's frame, as the
+    points)."""
+    if params.crop_frame != "base":
+        return points
+    if base is None:
+        raise ValueError("perception.crop_frame=base needs the base's pose")
+    c, s = np.cos(base[2]), np.sin(base[2])
+    dx, dy = points[:, 0] - base[0], points[:, 1] - base[1]
+    return np.column_stack([c * dx + s * dy, -s * dx + c * dy, points[:, 2]])
+
+
 def crop_mask(
     points: np.ndarray, params: PerceptionParams, base: np.ndarray | None = None
 ) -> np.ndarray:
-    """Points inside the axis-aligned workspace box, boolean mask of shape (n,). With
-    ``params.crop_frame == "base"`` the box is in the frame of the base at ``base``
-    ``[x, y, yaw]`` (odometry's frame, as the points)."""
+    """Points inside the axis-aligned workspace box, boolean mask of shape (n,); the box
+    is in the frame :func:`in_crop_frame` says."""
     lo = np.asarray(params.crop_min)
     hi = np.asarray(params.crop_max)
-    if params.crop_frame == "base":
-        if base is None:
-            raise ValueError("perception.crop_frame=base needs the base's pose")
-        c, s = np.cos(base[2]), np.sin(base[2])
-        dx, dy = points[:, 0] - base[0], points[:, 1] - base[1]
-        points = np.column_stack([c * dx + s * dy, -s * dx + c * dy, points[:, 2]])
+    points = in_crop_frame(points, params, base)
     return np.all((points >= lo) & (points <= hi), axis=1)
+
+
+def crop_faces(points: np.ndarray, lo: np.ndarray, hi: np.ndarray, touch: float) -> list[str]:
+    """Faces of the box ``lo``..``hi`` that ``points`` (n, 3), in the box's frame, come
+    within ``touch`` of: ``x_min``, ``x_max``, ``y_min``, ``y_max``, ``z_min``, ``z_max``."""
+    if not len(points):
+        return []
+    low, high = points.min(axis=0), points.max(axis=0)
+    faces = []
+    for k, axis in enumerate("xyz"):
+        if low[k] - lo[k] <= touch:
+            faces.append(f"{axis}_min")
+        if hi[k] - high[k] <= touch:
+            faces.append(f"{axis}_max")
+    return faces
 
 
 def self_filter_mask(points: np.ndarray, robot: RobotGeometry | None) -> np.ndarray:

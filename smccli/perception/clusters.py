@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
+from typing import Any
 
 import cv2
 import numpy as np
 import open3d as o3d
 
-from smccli.perception.cloud import object_points_on_planes, plane_distance, support_plane
+from smccli.perception.cloud import (
+    crop_faces,
+    in_crop_frame,
+    object_points_on_planes,
+    plane_distance,
+    support_plane,
+)
 from smccli.perception.histogram import hsv_histogram
 from smccli.perception.params import PerceptionParams
 from smccli.world.geometry import wrap
@@ -40,6 +47,10 @@ class Cluster:
     n_points: int
     """Number of points in the cluster (after the optional voxel downsampling); with it off,
     the object's area in the image [px]."""
+    crop_faces: tuple[str, ...] = ()
+    """Faces of the perception's crop box the cluster's points reach (``x_min``, ...,
+    ``z_max``, within ``crop_touch``): the box may cut the object there. Not stored in
+    trees: a warning for record, doctor and compile."""
 
     @property
     def location(self) -> np.ndarray:
@@ -356,30 +367,60 @@ def clusters_from_frame(
             plane = support_plane(points[idx], planes)
         else:
             plane = planes[0] if planes else None
-        found.append(describe_cluster(points[idx], colors[idx], plane, params, cut[idx]))
+        cluster = describe_cluster(points[idx], colors[idx], plane, params, cut[idx])
+        faces = crop_faces(
+            in_crop_frame(points[idx], params, base),
+            np.asarray(params.crop_min),
+            np.asarray(params.crop_max),
+            params.crop_touch,
+        )
+        found.append(replace(cluster, crop_faces=tuple(faces)) if faces else cluster)
     found.sort(key=lambda c: (float(c.centroid[0]), float(c.centroid[1])))
     return tuple(found)
 
 
-def cluster_to_dict(c: Cluster) -> dict:
+def _json(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    return value
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+_STORED = tuple(f for f in fields(Cluster) if f.name != "crop_faces")
+"""The fields a tree keeps: ``crop_faces`` is a warning about the frame it came from."""
+
+
+def cluster_to_dict(c: Cluster) -> dict[str, Any]:
     """JSON-ready form of a cluster (lists of floats), for tree files and logs."""
-    return {
-        "centroid": [float(v) for v in c.centroid],
-        "yaw": float(c.yaw),
-        "yaw_period": float(c.yaw_period),
-        "extents": [float(v) for v in c.extents],
-        "histogram": [float(v) for v in c.histogram],
-        "n_points": int(c.n_points),
-    }
+    return {f.name: _json(getattr(c, f.name)) for f in _STORED}
 
 
-def cluster_from_dict(d: dict) -> Cluster:
-    """Inverse of :func:`cluster_to_dict`."""
-    return Cluster(
-        centroid=np.asarray(d["centroid"], dtype=np.float64),
-        yaw=float(d["yaw"]),
-        yaw_period=float(d["yaw_period"]),
-        extents=np.asarray(d["extents"], dtype=np.float64),
-        histogram=np.asarray(d["histogram"], dtype=np.float64),
-        n_points=int(d["n_points"]),
-    )
+def cluster_from_dict(data: dict[str, Any]) -> Cluster:
+    """Inverse of :func:`cluster_to_dict`; arrays come back as float arrays.
+
+    TreeError for a value that is not a number (array fields: a list of numbers;
+    ``np.asarray`` would turn the string ``"inf"`` into a float) and for a centroid or
+    extents not of length 3.
+    """
+    from smccli.errors import TreeError
+
+    kwargs: dict[str, Any] = {}
+    for f in _STORED:
+        v = data[f.name]
+        if f.type == "np.ndarray":  # annotations are strings (``from __future__``)
+            if not (isinstance(v, list) and all(_is_number(x) for x in v)):
+                raise TreeError(f"cluster {f.name}: expected a list of numbers")
+            kwargs[f.name] = np.asarray(v, dtype=float)
+        elif _is_number(v):
+            kwargs[f.name] = v
+        else:
+            raise TreeError(f"cluster {f.name}: expected a number")
+    for name, shape in (("centroid", (3,)), ("extents", (3,))):
+        if np.shape(kwargs[name]) != shape:
+            raise TreeError(f"cluster {name}: expected 3 numbers, found {kwargs[name]!r:.60}")
+    return Cluster(**kwargs)

@@ -14,15 +14,19 @@ class PerceptionParams:
     """Knobs of :func:`~smccli.perception.clusters_from_frame` and :func:`d_cluster`.
 
     The crop box is per scene (it must hold the table top and what stands on it, and
-    exclude the floor); the defaults fit the built-in scenes: the world origin at the
-    robot's base on the table top, the table in front along +x (``--set
-    perception.crop_min=...`` for other set-ups).
+    exclude the floor): a scene's trees start with the box its arm can reach
+    (:func:`scene_perception`) unless the scene file sets one. The defaults here are the
+    box of the first built-in scenes (the world origin at the robot's base on the table
+    top, the table in front along +x), used only where no scene is known.
     """
 
     crop_min: tuple[float, float, float] = (0.15, -0.65, -0.05)
     """Lower corner of the workspace box, world frame [m]."""
     crop_max: tuple[float, float, float] = (1.0, 0.65, 0.6)
     """Upper corner of the workspace box, world frame [m]."""
+    crop_touch: float = field(default=0.005, metadata={"omit_default": True})
+    """A cluster with points this close to a face of the crop box may be cut by it: record,
+    doctor and compile warn [m] (a pixel spans 2-3 mm at 0.6 m in 320x240)."""
     crop_frame: str = field(default="world", metadata={"omit_default": True})
     """Frame of the crop box: ``world``, or ``base`` for a mobile manipulator (the box moves
     with the robot: in front of it, at the height its hand works)."""
@@ -124,6 +128,13 @@ class PerceptionParams:
 
 def scene_perception(scene: Scene) -> PerceptionParams:
     """The perception settings a scene's trees start with: the defaults with the scene
-    file's ``perception`` section (a mobile manipulator's crop box in its base's frame)."""
+    file's ``perception`` section; an arm's crop box, unless the scene sets it, from its
+    reach and its objects (:func:`~smccli.perception.workspace.workspace_box`)."""
     settings: dict[str, Any] = dict(scene.perception)
+    if scene.robot.base is None and scene.robot.arm_joints:
+        from smccli.perception.workspace import workspace_box
+
+        lo, hi = workspace_box(scene)
+        settings.setdefault("crop_min", lo)
+        settings.setdefault("crop_max", hi)
     return replace(PerceptionParams(), **settings)

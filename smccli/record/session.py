@@ -98,6 +98,11 @@ class RecordSummary:
     """File size [bytes]."""
     interrupted: str | None = None
     """Why the recording stopped early (``SIGINT``, ``SIGTERM``), or None if it finished."""
+    task: dict | None = None
+    """The log's task verdict (``smc_end``): ``{success, reason, criteria}``."""
+    warnings: tuple[str, ...] = ()
+    """What compile will warn about this demonstration (an object the crop box cuts, a
+    fragment ending far from any object...), said while the operator is still there."""
 
 
 def _metadata(scene: Scene, cfg: RecordConfig, extra: dict[str, str]) -> dict[str, str]:
@@ -218,7 +223,7 @@ def record_episodes(
                 say(f"episode {i + 1}/{cfg.episodes} discarded; recording it again")
                 continue
             summaries.append(
-                _summary(outs[i], sim.t, time.perf_counter() - wall0, marks, interrupted)
+                _summary(outs[i], sim.t, time.perf_counter() - wall0, marks, interrupted, scene)
             )
             last = i + 1 == cfg.episodes
             ended = interrupted is not None or (
@@ -243,9 +248,10 @@ def record_episodes(
 
 
 def _summary(
-    out: Path, duration: float, wall: float, marks: int, interrupted: str | None
+    out: Path, duration: float, wall: float, marks: int, interrupted: str | None, scene: Scene
 ) -> RecordSummary:
     summary = log_summary(out)
+    task, warnings = _compile_check(out, scene)
     return RecordSummary(
         path=out,
         duration=duration,
@@ -254,7 +260,26 @@ def _summary(
         topics={k: (int(v["count"]), float(v["rate_hz"])) for k, v in summary["topics"].items()},
         size_bytes=out.stat().st_size,
         interrupted=interrupted,
+        task=task,
+        warnings=warnings,
     )
+
+
+def _compile_check(out: Path, scene: Scene) -> tuple[dict | None, tuple[str, ...]]:
+    """The log's task verdict and what compile's extraction warns about it (as doctor's
+    ``smcs`` row), or why it could not be extracted."""
+    from smccli.errors import SmcError
+    from smccli.learn.compile import extract_chain, scene_params
+    from smccli.learn.segmentation import SegmentMode
+    from smccli.logs import read_log
+    from smccli.logs import topics as tp
+
+    try:
+        log = read_log(out, topics=tp.READ_TOPICS, lazy_frames=True)
+        chain = extract_chain(log, scene_params(scene), SegmentMode.markers, scene)
+    except SmcError as e:
+        return None, (f"compile would refuse it: {e}",)
+    return log.task, chain.warnings
 
 
 def record_session(

@@ -1,0 +1,52 @@
+"""The guides in ``docs/`` as tests: the files a guide shows and the commands it runs.
+
+A guide marks each file the reader writes by a fenced block whose first line is a comment
+naming its path (``# file: sort/scene.yaml``, ``<!-- file: sort/scene.xml -->``), and its
+commands by ``console`` blocks whose lines start with ``$ ``. A test writes exactly those
+files into a fresh folder and runs exactly those commands there, in order.
+"""
+
+from __future__ import annotations
+
+import re
+import shlex
+from pathlib import Path
+
+_BLOCK = re.compile(r"^```(\w*)\n(.*?)^```", re.DOTALL | re.MULTILINE)
+_FILE = re.compile(r"^(?:#|<!--)\s*file:\s*(\S+?)\s*(?:-->)?$")
+
+
+def guide_files(guide: Path) -> dict[str, str]:
+    """Path (relative to the reader's folder) -> text, for every file block of ``guide``."""
+    files = {}
+    for _, body in _BLOCK.findall(guide.read_text(encoding="utf-8")):
+        first, _, rest = body.partition("\n")
+        m = _FILE.match(first.strip())
+        if m:
+            assert m.group(1) not in files, f"{guide}: {m.group(1)} shown twice"
+            files[m.group(1)] = rest
+    return files
+
+
+def guide_commands(guide: Path) -> list[list[str]]:
+    """The argument lists of every ``$ `` line of the guide's ``console`` blocks, in order."""
+    commands = []
+    for lang, body in _BLOCK.findall(guide.read_text(encoding="utf-8")):
+        if lang == "console":
+            commands += [shlex.split(line[2:]) for line in body.splitlines() if line[:2] == "$ "]
+    return commands
+
+
+def write_guide_files(guide: Path, folder: Path) -> dict[str, Path]:
+    """Write the guide's files under ``folder``; returns their paths."""
+    written = {}
+    for rel, text in guide_files(guide).items():
+        path = folder / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text, encoding="utf-8")
+        written[rel] = path
+    return written
+
+
+SUCCEEDED = re.compile(r"(\d+)/(\d+) succeeded")
+"""A campaign's summary line: ``NAME: 39/40 succeeded = ...``."""
