@@ -179,6 +179,31 @@ BROKEN_ROBOTS = {
         "geom_group: 2",
         ["geom_group (line 14)", "is in group 3, not 2"],
     ),
+    "home-gripper-up": (
+        "home: [0.0, 0.2, 1.9, 0.0, 1.04, 0.0]",
+        "home: [0.0, 0.2, 1.9, 0.0, -1.5, 0.0]",
+        ["arm.home (line 8)", "points 146 deg from straight down", "gripper pointing down"],
+    ),
+    "joints-out-of-order": (
+        "wrist_roll, wrist_pitch, wrist_rotate]\n  actuators: [m_pan, m_lift, m_elbow, m_roll, "
+        "m_pitch, m_rotate]\n  home: [0.0, 0.2, 1.9, 0.0, 1.04, 0.0]",
+        "wrist_roll, wrist_rotate, wrist_pitch]\n  actuators: [m_pan, m_lift, m_elbow, m_roll, "
+        "m_rotate, m_pitch]\n  home: [0.0, 0.2, 1.9, 0.0, 0.0, 1.04]",
+        ["arm.joints (line 6)", "'wrist_pitch' does not roll the gripper", "ending with"],
+    ),
+}
+BROKEN_MJCF = {
+    # case: (old, new in robot.xml, what the one line names)
+    "roll-flipped": (
+        '<joint name="wrist_rotate" type="hinge" axis="0 0 1"',
+        '<joint name="wrist_rotate" type="hinge" axis="0 0 -1"',
+        ["arm.joints (line 6)", "'wrist_rotate' rolls the gripper the other way", "flip"],
+    ),
+    "pan-upside-down": (
+        '<joint name="shoulder_pan" type="hinge" axis="0 0 1"',
+        '<joint name="shoulder_pan" type="hinge" axis="0 0 -1"',
+        ["arm.joints (line 6)", "'shoulder_pan' turns about [0.00, 0.00, -1.00]", "flip"],
+    ),
 }
 
 
@@ -206,6 +231,40 @@ def test_broken_robot_file_gets_one_line(tmp_path: Path, case: str) -> None:
     assert message.startswith(f"{robot_file}: "), message
     for part in parts:
         assert part in message, (part, message)
+
+
+@pytest.mark.parametrize("case", sorted(BROKEN_MJCF))
+def test_robot_whose_axes_break_the_controllers_assumptions_gets_one_line(
+    tmp_path: Path, case: str
+) -> None:
+    """A wrist roll of the other sign or an upside-down pan: `smc robots` says what to fix
+    (before, both passed and every target later read "out of the robot's reach")."""
+    old, new, parts = BROKEN_MJCF[case]
+    _broken_copy(tmp_path, "geom_group: 3", "geom_group: 3")
+    xml = tmp_path / "robots" / "six" / "robot.xml"
+    assert old in xml.read_text(), old
+    xml.write_text(xml.read_text().replace(old, new, 1))
+    robot_file = tmp_path / "robots" / "six" / "robot.yaml"
+    proc = smc("robots", robot_file)
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert lines[0].startswith(f"error: {robot_file}: "), lines[0]
+    assert all(p in lines[0] for p in parts), lines[0]
+
+
+def test_unreachable_target_says_what_fails() -> None:
+    """Position (by how much) or orientation, and the joints the IK left at a limit."""
+    import numpy as np
+
+    from smccli.world.controller import reach_problem
+
+    robot = load_robot("arm")
+    model = mujoco.MjModel.from_xml_path(str(robot.mjcf_path))
+    assert reach_problem(model, robot, np.array([0.5, 0.0, 0.1, 0.3])) is None
+    far = reach_problem(model, robot, np.array([2.0, 0.0, 0.1, 0.0]))
+    assert far is not None and far.startswith("the position stays 11"), far
+    near = reach_problem(model, robot, np.array([0.05, 0.0, 0.05, 0.0]))
+    assert near is not None and "at its upper limit" in near, near
 
 
 def test_broken_robot_file_through_the_cli(tmp_path: Path) -> None:

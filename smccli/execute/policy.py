@@ -42,7 +42,7 @@ from smccli.perception.distance import MIN_EXTENT
 from smccli.perception.histogram import BC_MIN
 from smccli.perception.room import d_room, room_histogram
 from smccli.perception.scan import Scan2D, align_scans, chamfer
-from smccli.world.controller import reachable
+from smccli.world.controller import reach_problem
 from smccli.world.geometry import between
 from smccli.world.robot import Robot
 from smccli.world.sensors import CameraFrame, RobotGeometry
@@ -397,7 +397,7 @@ class TreePolicy:
     ``tree``: the SMC tree; ``robot``: the robot it runs on (its file:
     :func:`smccli.world.robot.load_robot`, or ``scene.robot``); ``model``: a MuJoCo model
     holding the robot (``scene.model()``), to refuse goals out of the arm's reach
-    (:func:`smccli.world.controller.reachable`); without one no reach check is made.
+    (:func:`smccli.world.controller.reach_problem`); without one no reach check is made.
 
     The policy keeps the frontier (the current node and those equivalent to it):
     :meth:`decide` plans the next action from an :class:`Observation`, :meth:`advance`
@@ -529,11 +529,12 @@ class TreePolicy:
         if base_now is not None and a.poi == "hand":
             stand = base_now if base_goal is None else base_goal
             hand_goal = between(stand[[0, 1, 3]], goal)
-        if (
-            self.model is not None
-            and a.poi != "base"
-            and not reachable(self.model, self.robot, hand_goal)
-        ):
+        problem = (
+            None
+            if self.model is None or a.poi == "base"
+            else reach_problem(self.model, self.robot, hand_goal)
+        )
+        if problem is not None:
             return Plan(
                 decision=dec,
                 edge=edge.id,
@@ -543,7 +544,7 @@ class TreePolicy:
                 stopped=True,
                 stop="target_unreachable",
                 reason=f"edge {edge.id}: goal [{goal[0]:.3f}, {goal[1]:.3f}, {goal[2]:.3f}] m, "
-                f"yaw {goal[3]:.2f} rad is out of reach",
+                f"yaw {goal[3]:.2f} rad is out of reach: {problem}",
             )
         n_steps = max(2, round(duration / control_period)) + 1
         times, poses = rollout(a.dmp, start=start, goal=goal, duration=duration, n_steps=n_steps)

@@ -22,7 +22,7 @@ import numpy as np
 
 from smccli.errors import ScriptError
 from smccli.schemas import SchemaProblem, YamlDocument, check_yaml, key_path, parse_yaml
-from smccli.world.controller import home_poi, reachable
+from smccli.world.controller import home_poi, reach_problem
 from smccli.world.geometry import between, compose, near, wrap
 from smccli.world.layout import nominal_layout, sample_layout
 from smccli.world.scene import ROBOT_KEY, Layout, Scene
@@ -330,11 +330,12 @@ class ScriptOperator:
         if self._base is not None:
             return self._start_mobile(act)
         goal = self._home() if step.home else self._goal(step)
-        if not reachable(self.sim.model, self.sim.robot, goal):
+        problem = reach_problem(self.sim.model, self.sim.robot, goal)
+        if problem is not None:
             raise ScriptError(
                 f"{step.where(self.script.source)}: target "
                 f"[{goal[0]:.3f}, {goal[1]:.3f}, {goal[2]:.3f}] m, yaw {goal[3]:.2f} rad "
-                "is out of the robot's reach"
+                f"is out of the robot's reach: {problem}"
             )
         act.start = self._target.copy()
         # Turn the short way from the current command (the controller wraps too).
@@ -384,11 +385,13 @@ class ScriptOperator:
         else:  # it rides with the base
             act.goal = self._target.copy()
         act.start = self._target.copy()
-        if not reachable(self.sim.model, self.sim.robot, act.goal):
+        problem = reach_problem(self.sim.model, self.sim.robot, act.goal)
+        if problem is not None:
             g = act.goal
             raise ScriptError(
                 f"{step.where(self.script.source)}: target [{g[0]:.3f}, {g[1]:.3f}, "
-                f"{g[2]:.3f}] m, yaw {g[3]:.2f} rad in the base's frame is out of reach"
+                f"{g[2]:.3f}] m, yaw {g[3]:.2f} rad in the base's frame is out of reach: "
+                f"{problem}"
             )
         arm = (
             0.0

@@ -306,23 +306,47 @@ class CartesianController:
         return q, bool(np.linalg.norm(e[:3]) < tol_pos and np.linalg.norm(e[3:]) < tol_rot)
 
 
-def reachable(
+def reach_problem(
     model: mujoco.MjModel, robot: Robot, target: np.ndarray, *, min_z: float = 0.01
-) -> bool:
-    """Whether the POI can reach ``target`` [x, y, z, yaw] pointing down (IK converges); a
-    mobile base without an arm reaches any finite pose (walls stop it, not its joints).
+) -> str | None:
+    """Why the POI cannot reach ``target`` [x, y, z, yaw] pointing down, or None when the
+    IK converges; a mobile base without an arm reaches any finite pose (walls stop it, not
+    its joints).
 
-    ``min_z`` [m]: lowest POI height above the table accepted (keeps the fingertips out).
+    The reason says what fails: the position (by how much) or only the orientation, and
+    which joints the IK left at a limit. ``min_z`` [m]: lowest POI height above the table
+    accepted (keeps the fingertips out).
     """
     target = np.asarray(target, dtype=float)
     if target.shape != (4,) or not np.all(np.isfinite(target)):
-        return False
+        return "not a finite [x, y, z, yaw]"
     if not robot.arm_joints:  # a mobile base: its joints take the pose as it is
-        return True
+        return None
     if target[2] < min_z:
-        return False
-    _, ok = CartesianController(model, robot).solve(target)
-    return ok
+        return f"below the lowest POI height ({min_z} m above the table)"
+    controller = CartesianController(model, robot)
+    q, ok = controller.solve(target)
+    if ok:
+        return None
+    e = controller.error(q, target)
+    pos, rot = float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))
+    at = [
+        f"{name} at its {'lower' if qi <= lo + 1e-3 else 'upper'} limit {qi:.2f} rad"
+        for name, qi, lo, hi in zip(robot.arm_joints, q, controller.lo, controller.hi, strict=True)
+        if qi <= lo + 1e-3 or qi >= hi - 1e-3
+    ]
+    if pos >= 1e-3:
+        what = f"the position stays {pos * 1000:.0f} mm short"
+    else:
+        what = f"the position is reached but the gripper stays {math.degrees(rot):.0f} deg off"
+    return what + (f" ({', '.join(at)})" if at else "")
+
+
+def reachable(
+    model: mujoco.MjModel, robot: Robot, target: np.ndarray, *, min_z: float = 0.01
+) -> bool:
+    """Whether :func:`reach_problem` finds none."""
+    return reach_problem(model, robot, target, min_z=min_z) is None
 
 
 def home_poi(model: mujoco.MjModel, robot: Robot) -> np.ndarray:

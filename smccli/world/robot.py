@@ -15,6 +15,7 @@ limits), so a tree is never executed on a robot that moves differently.
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -279,6 +280,68 @@ def check_robot(
         raise error_cls(
             f"{doc.source}: {doc.where(('gripper', 'opening'))}: closed and open are equal"
         )
+    if robot.arm_joints:
+        _check_axes(robot, model, doc, error_cls)
+
+
+POINTS_DOWN = math.radians(15)
+"""At home the POI's approach axis (its z) is at most this far from straight down [rad]."""
+ALONG = math.radians(5)
+"""The first joint's axis is this close to vertical, the last one's to the approach [rad]."""
+
+
+def _check_axes(
+    robot: Robot, model: mujoco.MjModel, doc: YamlDocument, error_cls: type[SmcError]
+) -> None:
+    """What the controller assumes of an arm (:mod:`smccli.world.controller`), at home:
+    the gripper points down, the first joint turns about the upward vertical and the last
+    rolls the gripper about its approach axis, in the approach's direction (so that the
+    POI's yaw is q_first - q_last + a constant). A robot that breaks one reached its
+    targets nowhere and said "out of reach"; here it gets the line that says what to fix."""
+    data = mujoco.MjData(model)
+    for name, q in zip(robot.arm_joints, robot.home, strict=True):
+        data.qpos[model.jnt_qposadr[model.joint(name).id]] = q
+    mujoco.mj_kinematics(model, data)
+    approach = data.site_xmat[model.site(robot.poi).id].reshape(3, 3)[:, 2]
+    first, last = robot.arm_joints[0], robot.arm_joints[-1]
+    first_axis = data.xaxis[model.joint(first).id]
+    last_axis = data.xaxis[model.joint(last).id]
+
+    def angle(a: np.ndarray, b: np.ndarray) -> float:
+        return math.acos(max(-1.0, min(1.0, float(a @ b))))
+
+    home = f"{doc.source}: {doc.where(('arm', 'home'))}"
+    down = angle(approach, np.array([0.0, 0.0, -1.0]))
+    if down > POINTS_DOWN:
+        raise error_cls(
+            f"{home}: at home the gripper's approach axis (the z of site {robot.poi!r}) points "
+            f"{math.degrees(down):.0f} deg from straight down; give a home posture with the "
+            "gripper pointing down, or turn the site so that its z leaves the fingers"
+        )
+    joints = f"{doc.source}: {doc.where(('arm', 'joints'))}"
+    if angle(first_axis, np.array([0.0, 0.0, 1.0])) > ALONG:
+        flip = " (flip its axis)" if first_axis[2] < 0 else ""
+        raise error_cls(
+            f"{joints}: the first joint {first!r} turns about [{_vec3(first_axis)}], not the "
+            f"upward vertical{flip}: smc needs a base joint that turns the arm about +z"
+        )
+    roll = angle(last_axis, approach)
+    if roll > ALONG:
+        if math.pi - roll <= ALONG:
+            raise error_cls(
+                f"{joints}: the last joint {last!r} rolls the gripper the other way: its axis "
+                f"at home is [{_vec3(last_axis)}], against the approach axis; flip the joint's "
+                "axis (and mirror its range) so that it points out of the fingers"
+            )
+        raise error_cls(
+            f"{joints}: the last joint {last!r} does not roll the gripper about its approach "
+            f"axis (its axis at home is {math.degrees(roll):.0f} deg from it): list the arm's "
+            "joints base to flange, ending with the wrist roll"
+        )
+
+
+def _vec3(v: np.ndarray) -> str:
+    return ", ".join(f"{float(x) + 0.0:.2f}" for x in v)
 
 
 def _check_geom_group(robot: Robot, model: mujoco.MjModel, doc: YamlDocument, label: str) -> None:
@@ -337,3 +400,28 @@ def kinematics_digest(robot: Robot, model: mujoco.MjModel) -> str:
     rows.append(f"poi {fmt(model.site_pos[site])} {fmt(model.site_quat[site])}")
     rows.append("joints " + " ".join(robot.joint_names))
     return "sha256:" + hashlib.sha256("\n".join(rows).encode()).hexdigest()
+
+
+def arm_reach(model: mujoco.MjModel, robot: Robot) -> tuple[np.ndarray, float]:
+    """Where the arm's first joint's axis is and how far from it the POI can get: (anchor
+    (3,) [m] world frame at the model's reference posture, radius [m]).
+
+    The radius bounds the reach from the chain alone: the sum of the offsets from the first
+    joint's anchor to the POI site (each body's offset from its parent, the site's from its
+    body), which no posture can exceed. Sampling postures would give a tighter figure that
+    may miss the stretched one; a crop box must not be too small.
+    """
+    first = model.joint(robot.arm_joints[0]).id
+    top = int(model.jnt_bodyid[first])
+    site = model.site(robot.poi).id
+    radius = float(np.linalg.norm(model.site_pos[site]))
+    b = int(model.site_bodyid[site])
+    while b != top:
+        if b <= 0:
+            raise SceneError(f"robot {robot.name}: POI {robot.poi!r} is not below its first joint")
+        radius += float(np.linalg.norm(model.body_pos[b]))
+        b = int(model.body_parentid[b])
+    radius += float(np.linalg.norm(model.jnt_pos[first]))
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    return data.xanchor[first].copy(), radius
