@@ -211,3 +211,24 @@ def test_frontier_keeps_branches_that_differ_only_by_their_path(bench):
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(pytest.main([__file__, "-q"]))
+
+
+def test_the_hand_backs_out_after_the_last_release(bench) -> None:
+    """After the tree's last action opened the gripper, the arm lifts its hand RETREAT
+    along the approach axis (up): no finger stays on the object it released."""
+    from smccli.execute.executor import RETREAT, TreeExecutor
+    from smccli.execute.sensing import Sensors
+
+    _, tree_path = bench
+    tree, scene = resolve(tree_path, None)
+    sim = Sim(scene, layout_for(scene, seed=0))
+    commands = []
+    executor = TreeExecutor(tree, Sensors(sim, on_step=commands.append))
+    outcome, _, _, actions, _ = executor.run()
+    poi_end = sim.poi()
+    sim.close()
+    assert outcome == "success" and actions[-1].event == "open", outcome
+    released = [c for c in commands if c.t < actions[-1].t1 - 1e-9][-1].target
+    assert commands[-1].target[2] == pytest.approx(released[2] + RETREAT, abs=1e-9)
+    np.testing.assert_allclose(commands[-1].target[[0, 1, 3]], released[[0, 1, 3]])
+    assert poi_end[2] > released[2] + RETREAT - 0.005  # the POI arrived there

@@ -56,6 +56,7 @@ from smccli.learn.dmp import Dmp, rollout
 from smccli.learn.tree import ROOT, Edge, Tree
 from smccli.perception import Cluster, scale_reading
 from smccli.perception.scan import align_scans
+from smccli.world.controller import reachable
 from smccli.world.geometry import between, compose, se2, se2_pose
 from smccli.world.sensors import CameraFrame, PoiCommand
 
@@ -93,6 +94,12 @@ ARRIVAL_TOLERANCE = 0.005
 scripted operator's moves)."""
 MAX_HOLD = 1.5
 """Longest hold of the goal after a rollout [s]."""
+RETREAT = 0.08
+"""After the tree's last action opened the gripper, an arm backs its hand out this far
+along the approach axis (up) [m]: the demonstrations' own retreat comes after their last
+mark, so no SMC holds it, and a one-jaw gripper's fixed jaw stayed on the object."""
+RETREAT_SPEED = 0.15
+"""Speed of that retreat [m/s] (the scripted operator's)."""
 RELOCALIZE_PERIOD = 0.5
 """While a base drives to a goal stored with a scan, it aligns its scan to that scan this
 often and corrects its odometry-frame goal and path (closed loop: odometry drifts) [s]."""
@@ -426,6 +433,26 @@ class TreeExecutor:
             D = D_new
         return goal
 
+    def _retreat(self) -> None:
+        """Back the hand out of what it released: :data:`RETREAT` up along the approach
+        axis at :data:`RETREAT_SPEED`, as far up as the arm reaches (an arm only: a mobile
+        manipulator's hand rides its base's frame)."""
+        s, last = self.sensors, self._last_cmd
+        if s.mobile_manipulator:
+            return
+        start = np.asarray(last.target, dtype=float)
+        goal = start.copy()
+        for rise in (RETREAT, RETREAT / 2):
+            goal[2] = start[2] + rise
+            if reachable(s.model, s.robot, goal):
+                break
+        else:
+            return
+        n = max(2, round(float(goal[2] - start[2]) / RETREAT_SPEED / s.control_period))
+        for k in range(1, n + 1):
+            self._send(PoiCommand(s.t, start + (goal - start) * (k / n), last.gripper))
+        self._arrive(goal, last.gripper)
+
     def _arrive(self, target: np.ndarray, grip: float, i: int | None = None) -> bool:
         """Hold ``target`` (the plan's ``i``-th pose) until the POI is within the tolerance
         (at most MAX_HOLD)."""
@@ -460,6 +487,8 @@ class TreeExecutor:
         t_start = self.sensors.t
         while True:
             if policy.done:
+                if actions and actions[-1].event == "open":
+                    self._retreat()
                 return "success", "leaf reached", decisions, actions, path
             if self.sensors.t - t_start > self.max_time:
                 return "timeout", f"no leaf after {self.max_time:.0f} s", decisions, actions, path
