@@ -19,6 +19,7 @@ import sys
 import threading
 import time
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -316,6 +317,9 @@ def test_a_session_drags_the_marker_steps_keys_and_records_two_episodes(tmp_path
         code, stderr = err.proc.returncode, err.rest()
     assert code == 0, stderr
     assert "episode 2/2 kept" in stderr and "session ended" in stderr
+    # Enter's verdict on each demonstration (a few key presses do not do the task): in the
+    # session's line, and on the HUD of the next episode (test_hud_shows_the_last_verdict).
+    assert "mark(s); task FAILED: " in stderr, stderr
     assert sorted(p.name for p in tmp_path.glob("kb*")) == ["kb-000.mcap", "kb-001.mcap"]
     first_ep, second_ep = read_log(tmp_path / "kb-000.mcap"), read_log(tmp_path / "kb-001.mcap")
     assert first_ep.metadata["episode"] == "1/2" and second_ep.metadata["episode"] == "2/2"
@@ -599,3 +603,19 @@ def test_replay_teach_keyboard_continues_where_the_tree_stops(tmp_path, display)
     assert after.history[-1]["logs"][0]["at"] == ROOT
     new = [e for e in after.edges if e.sources[0].log == "tree_taught_n0_000.mcap"]
     assert new and new[0].parent == ROOT and len(after.children(ROOT)) == 2
+
+
+def test_hud_shows_the_last_demonstrations_verdict() -> None:
+    """After Enter the recorder checks the task; the next episode's HUD shows the verdict."""
+    from smccli.record.hud import HudState, texts
+    from smccli.record.session import task_line
+
+    state = HudState("arm", 1.0, True, 0, np.zeros(4), np.zeros(4), episode=(2, 3))
+    assert "last demo" not in texts(state)[0][2]
+    failed = {"success": False, "reason": "white_box not resting inside orange_box"}
+    verdict = task_line(failed)
+    assert verdict == "task FAILED: white_box not resting inside orange_box"
+    labels, values = texts(replace(state, last_task=verdict))[0][2:]
+    assert labels.splitlines()[-1] == "last demo" and values.splitlines()[-1] == verdict
+    assert task_line({"success": True}) == "task achieved"
+    assert task_line({"success": None, "reason": "the scene defines no task"}) is None

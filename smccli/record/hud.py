@@ -79,6 +79,9 @@ class HudState:
     """(this episode, episodes in the session), 1-based; None outside a session."""
     tab: bool = False
     """Tab switches modes (a mobile manipulator)."""
+    last_task: str | None = None
+    """What the recorder found at the end of the session's previous demonstration (its
+    task achieved or failed, and why); None: no previous one, or a scene without a task."""
 
 
 def to_world(sim: Sim, target: np.ndarray) -> tuple[np.ndarray, float]:
@@ -183,6 +186,9 @@ def texts(state: HudState) -> list[tuple[int, int, str, str]]:
         _pose(state.target),
         _pose(state.poi),
     ]
+    if state.last_task is not None:
+        labels.append("last demo")
+        values.append(state.last_task)
     keys, does = KEYS[state.mode]
     keys, does = f"{keys}\n{SESSION_KEYS[0]}", f"{does}\n{SESSION_KEYS[1]}"
     if state.tab:

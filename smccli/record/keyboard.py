@@ -274,6 +274,8 @@ class KeyboardOperator:
         self.marks = 0
         """Saliency marks so far in this episode (shown in the HUD)."""
         self.episode: tuple[int, int] | None = None
+        self.last_task: str | None = None
+        """The HUD's verdict on the previous demonstration (set by the session)."""
         """(this episode, episodes in the session), 1-based, shown in the HUD."""
         self._placed: tuple[np.ndarray, np.ndarray] | None = None  # the marker's last pose
         self.mobile_manipulator = sim.mobile_manipulator
@@ -354,6 +356,7 @@ class KeyboardOperator:
             poi=self.sim.poi(),
             episode=self.episode,
             tab=self.mobile_manipulator,
+            last_task=self.last_task,
         )
         place_marker(self.sim, self.target)
         self._placed = marker_pose(self.sim)

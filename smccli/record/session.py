@@ -222,9 +222,13 @@ def record_episodes(
                     raise
                 say(f"episode {i + 1}/{cfg.episodes} discarded; recording it again")
                 continue
-            summaries.append(
-                _summary(outs[i], sim.t, time.perf_counter() - wall0, marks, interrupted, scene)
+            summary = _summary(
+                outs[i], sim.t, time.perf_counter() - wall0, marks, interrupted, scene
             )
+            summaries.append(summary)
+            verdict = task_line(summary.task)
+            if keyboard is not None:
+                keyboard.last_task = verdict
             last = i + 1 == cfg.episodes
             ended = interrupted is not None or (
                 keyboard is not None and (keyboard.stopped or not keyboard.window_open)
@@ -233,7 +237,7 @@ def record_episodes(
                 left = "session ended" if ended or last else f"next: episode {i + 2}/{cfg.episodes}"
                 say(
                     f"episode {i + 1}/{cfg.episodes} kept: {outs[i]} ({sim.t:.1f} s, "
-                    f"{marks} mark(s)); {left}"
+                    f"{marks} mark(s){'; ' + verdict if verdict else ''}); {left}"
                 )
             if ended:
                 break
@@ -317,6 +321,13 @@ def record_session(
 
 TASK_SETTLE = 0.5
 """Sim time the scene settles after a demonstration before its task is checked [s]."""
+
+
+def task_line(task: dict | None) -> str | None:
+    """The task verdict in a few words (HUD, session messages); None without one."""
+    if not task or task.get("success") is None:
+        return None
+    return "task achieved" if task["success"] else f"task FAILED: {task.get('reason', '?')}"
 
 
 def task_outcome(sim: Sim) -> str:
