@@ -198,6 +198,13 @@ def record(
         raise typer.Exit(130)
 
 
+def _band_cell(band: dict | None) -> str:
+    """``trials, rate`` of one object's distance band."""
+    if band is None or not band["trials"]:
+        return "0"
+    return f"{band['trials']}, {100 * band['success_rate']:.0f}"
+
+
 def _print_summary(summary) -> None:
     out.print(
         f"[bold green]wrote[/] {escape(str(summary.path))}  ({summary.size_bytes / 1e6:.2f} MB, "
@@ -361,12 +368,20 @@ def _print_campaign(summary: dict[str, Any]) -> None:
         f"(95 % CI {100 * lo:.1f}-{100 * hi:.1f} %)",
         highlight=False,
     )
-    table = Table("distance from demo", "trials", "success [%]", "95 % CI")
-    for b in summary["by_band"]:
-        rate = "-" if b["success_rate"] is None else f"{100 * b['success_rate']:.1f}"
-        table.add_row(
-            b["label"], str(b["trials"]), rate, f"{100 * b['ci95'][0]:.0f}-{100 * b['ci95'][1]:.0f}"
-        )
+    by_object = summary.get("by_object") or {}
+    if len(by_object) > 1:  # each object's distance from where it was demonstrated
+        names = sorted(by_object)
+        cells = {n: {b["label"]: b for b in by_object[n]} for n in names}
+        labels = list(dict.fromkeys(b["label"] for n in names for b in by_object[n]))
+        table = Table("distance from demo", *(f"{n}: trials, success [%]" for n in names))
+        for label in labels:
+            table.add_row(label, *(_band_cell(cells[n].get(label)) for n in names))
+    else:
+        table = Table("distance from demo", "trials", "success [%]", "95 % CI")
+        for b in summary["by_band"]:
+            rate = "-" if b["success_rate"] is None else f"{100 * b['success_rate']:.1f}"
+            ci = f"{100 * b['ci95'][0]:.0f}-{100 * b['ci95'][1]:.0f}"
+            table.add_row(b["label"], str(b["trials"]), rate, ci)
     out.print(table)
     fails = ", ".join(f"{k} {v}" for k, v in summary["failures"].items() if v) or "none"
     out.print(f"failures: {fails}")

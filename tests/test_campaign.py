@@ -159,3 +159,37 @@ def test_pick_place_campaign(trees):
 def test_weigh_sort_campaign(trees):
     s = cp.run_campaign(trees["weigh_sort"], trials=12, seed=0, workers=2)
     assert s["success_rate"] >= 0.9, s["failures"]
+
+
+def test_bands_measure_each_object_from_where_it_was_demonstrated(tmp_path) -> None:
+    """A demonstration from a random layout: every object a layout moves is banded by its
+    distance from where that demonstration had it (the recorder's layout, kept in the
+    tree's history), not from the scene's nominal pose."""
+    from smccli.learn.compile import compile_logs
+    from smccli.record.session import RecordConfig, record
+
+    demo = tmp_path / "d.mcap"
+    script = REPO / "sample_logs" / "pick_place" / "demo1.yaml"
+    record(RecordConfig(scene="pick_place", script=script, output=demo, seed=3, randomize=True))
+    tree_path = tmp_path / "t.json"
+    compile_logs([demo], tree_path)
+    tree, scene = resolve(tree_path, None)
+    (demo_layout,) = cp.demo_layouts(tree)
+    assert set(demo_layout) >= {"orange_cube", "green_cylinder"}
+    trials = [cp.run_trial(tree, scene, seed=0, index=i) for i in range(8)]
+    shown = set()
+    for r in trials:
+        for name, d in r.distances.items():
+            nominal = math.dist(r.layout[name][:2], scene.object(name).pose[:2])
+            if name in demo_layout:  # demonstrated: from there
+                assert d == pytest.approx(math.dist(r.layout[name][:2], demo_layout[name][:2]))
+                assert d != pytest.approx(nominal)
+            else:  # the other variant's objects were never demonstrated
+                assert d == pytest.approx(nominal)
+            shown.add(name in demo_layout)
+        assert r.object in r.distances and r.distance == r.distances[r.object]
+    assert shown == {True, False}
+    r = trials[0]
+    summary = cp.summarize([r], scene=scene, tree=tree, seed=0, workers=1, wall_s=1.0)
+    assert sorted(summary["by_object"]) == sorted(r.distances)
+    assert sum(b["trials"] for b in summary["by_object"][r.object]) == 1

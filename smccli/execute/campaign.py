@@ -28,7 +28,7 @@ import math  # noqa: E402
 import multiprocessing as mp  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
-from collections.abc import Callable, Iterator, Sequence  # noqa: E402
+from collections.abc import Callable, Iterator, Mapping, Sequence  # noqa: E402
 from dataclasses import asdict, dataclass, field  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
@@ -44,7 +44,7 @@ from smccli.execute.executor import check_speed  # noqa: E402
 from smccli.learn.tree import Tree, digest  # noqa: E402
 from smccli.outputs import check_output, write_atomic  # noqa: E402
 from smccli.world.geometry import wrap  # noqa: E402
-from smccli.world.scene import ROBOT_KEY, Scene  # noqa: E402
+from smccli.world.scene import ROBOT_KEY, Layout, Scene  # noqa: E402
 from smccli.world.sim import OdometryDrift, Sim  # noqa: E402
 
 BANDS = (0.0, 0.05, 0.10, 0.15, 0.20, 0.25, 0.30, math.inf)
@@ -75,7 +75,8 @@ class TrialResult:
     object: str | None
     """The manipulated object."""
     distance: float
-    """Its start's horizontal distance from its nominal position [m]."""
+    """Its start's horizontal distance from where it was demonstrated (the nearest of the
+    tree's demonstrations that recorded their layout; else the scene's nominal pose) [m]."""
     yaw_distance: float
     """Its start yaw's distance from the nominal yaw, modulo a full turn [rad]."""
     path: list[str]
@@ -105,6 +106,9 @@ class TrialResult:
     """Object [x, y, z, yaw] at the end (evaluation)."""
     criteria: list[list[Any]] = field(default_factory=list)
     """Every success condition tried at the leaf: [task, what it found, whether it held]."""
+    distances: dict[str, float] = field(default_factory=dict)
+    """Every object a layout moves: its start's horizontal distance from where it was
+    demonstrated (as ``distance``) [m]: the bands of each object."""
 
     def repeatable(self) -> dict[str, Any]:
         """Every field but the wall-clock timings: what a rerun of the campaign with the
@@ -154,6 +158,34 @@ _SIMS = SimCache()
 """This process's simulators (pool and Dask workers keep theirs between trials)."""
 
 
+def demo_layouts(tree: Tree) -> list[dict[str, list[float]]]:
+    """Where the objects were at the start of each of the tree's demonstrations (the
+    recorder's ``layout`` metadata, kept in the tree's history; for reports only: the
+    policy never reads it)."""
+    return [
+        log["layout"]
+        for entry in tree.history
+        for log in entry.get("logs", ())
+        if isinstance(log.get("layout"), dict)
+    ]
+
+
+def demo_distances(
+    scene: Scene, layout: Layout, demos: Sequence[Mapping[str, Sequence[float]]]
+) -> dict[str, float]:
+    """Each object the layout moves (a range, or furniture under it) -> its horizontal
+    distance [m] from the nearest demonstration's start of it, or from its nominal pose
+    when no demonstration recorded one."""
+    out = {}
+    for o in scene.objects:
+        moves = o.range_x[0] != o.range_x[1] or o.range_y[0] != o.range_y[1] or o.on
+        if o.name not in layout or not moves:
+            continue
+        starts = [d[o.name][:2] for d in demos if o.name in d] or [o.pose[:2]]
+        out[o.name] = min(math.dist(layout[o.name][:2], xy) for xy in starts)
+    return out
+
+
 def run_trial(
     tree: Tree,
     scene: Scene,
@@ -172,6 +204,7 @@ def run_trial(
         r = episode(tree, scene, layout, seed=seed, drift=drift, speed=speed, sim=sim)
     obj = r.manipulated
     dist = yaw = 0.0
+    distances = demo_distances(scene, layout, demo_layouts(tree))
     if scene.start is not None and ROBOT_KEY in layout:
         obj = ROBOT_KEY
         x, y, _, a = layout[ROBOT_KEY]
@@ -179,7 +212,7 @@ def run_trial(
         yaw = abs(wrap(a - scene.start.pose[2]))
     elif obj is not None:
         spec = scene.object(obj)
-        dist = math.dist(layout[obj][:2], spec.pose[:2])
+        dist = distances.get(obj, math.dist(layout[obj][:2], spec.pose[:2]))
         yaw = abs(wrap(layout[obj][3] - spec.pose[3]))
     return TrialResult(
         index=index,
@@ -198,6 +231,7 @@ def run_trial(
         wall_time=r.wall_time,
         reason=r.reason,
         layout={k: list(v) for k, v in layout.items()},
+        distances=distances,
         decisions=[
             {
                 "chosen": d.chosen,
@@ -343,6 +377,27 @@ def _pct(values: Sequence[float], q: float) -> float | None:
     return float(np.percentile(values, q)) if len(values) else None
 
 
+def _bands(trials: Sequence[tuple[float, bool]], bands: Sequence[float]) -> list[dict[str, Any]]:
+    """Success by distance band: (distance [m], success) per trial -> one row per band."""
+    rows = []
+    for lo, hi in zip(bands[:-1], bands[1:], strict=True):
+        sel = [ok for d, ok in trials if lo <= d < hi]
+        if not sel and math.isinf(hi):
+            continue
+        k = sum(sel)
+        rows.append(
+            {
+                "band": [lo, None if math.isinf(hi) else hi],
+                "label": f"{lo:.2f}-{hi:.2f} m" if not math.isinf(hi) else f">{lo:.2f} m",
+                "trials": len(sel),
+                "successes": k,
+                "success_rate": k / len(sel) if sel else None,
+                "ci95": list(wilson(k, len(sel))),
+            }
+        )
+    return rows
+
+
 def summarize(
     results: Sequence[TrialResult],
     *,
@@ -356,22 +411,7 @@ def summarize(
     """The campaign summary (the ``--report`` JSON)."""
     n = len(results)
     succ = sum(r.success for r in results)
-    by_band = []
-    for lo, hi in zip(bands[:-1], bands[1:], strict=True):
-        sel = [r for r in results if lo <= r.distance < hi]
-        if not sel and math.isinf(hi):
-            continue
-        k = sum(r.success for r in sel)
-        by_band.append(
-            {
-                "band": [lo, None if math.isinf(hi) else hi],
-                "label": f"{lo:.2f}-{hi:.2f} m" if not math.isinf(hi) else f">{lo:.2f} m",
-                "trials": len(sel),
-                "successes": k,
-                "success_rate": k / len(sel) if sel else None,
-                "ci95": list(wilson(k, len(sel))),
-            }
-        )
+    by_band = _bands([(r.distance, r.success) for r in results], bands)
     failures = {c: sum(r.outcome == c for r in results) for c in FAILURES}
     lat = [v for r in results for v in r.latency_ms]
     per = [v for r in results for v in r.perceive_ms]
@@ -391,6 +431,12 @@ def summarize(
         "success_rate": succ / n if n else 0.0,
         "ci95": list(wilson(succ, n)),
         "by_band": by_band,
+        "by_object": {
+            name: _bands(
+                [(r.distances[name], r.success) for r in results if name in r.distances], bands
+            )
+            for name in sorted({k for r in results for k in r.distances})
+        },
         "failures": failures,
         "latency_ms": {
             "p50": _pct(lat, 50),

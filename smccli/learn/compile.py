@@ -368,6 +368,22 @@ def _read(job: _Job) -> _Read:
     return replace(read, params=params, chain=chain)
 
 
+def parse_layout(text: str | None) -> dict[str, list[float]] | None:
+    """The recorder's ``layout`` metadata (JSON: object -> [x, y, z, yaw]), or None when
+    absent or malformed (a report's distance bands then fall back to the nominal poses)."""
+    try:
+        doc = json.loads(text) if text else None
+    except ValueError:
+        return None
+    if not isinstance(doc, dict):
+        return None
+    ok = all(
+        isinstance(v, list) and len(v) == 4 and all(isinstance(x, (int, float)) for x in v)
+        for v in doc.values()
+    )
+    return {str(k): [float(x) for x in v] for k, v in doc.items()} if ok else None
+
+
 SCENE_FILES = ("scene.yaml", "scene.xml", "robot.yaml")
 """The attachments that hold a log's scene (:func:`smccli.world.scene.scene_of_log`)."""
 PARALLEL_MIN_LOGS = 6
@@ -495,6 +511,7 @@ def compile_logs(
             )
         known = tree.log_digests()
         added: list[Chain] = []
+        layouts: dict[str, dict[str, list[float]]] = {}
         skipped: list[Path] = []
 
         def job(path: Path) -> _Job:
@@ -589,6 +606,9 @@ def compile_logs(
                     robot=robot,
                 )
             added.append(replace(chain, at=taught))
+            layout = parse_layout(r.metadata.get("layout"))
+            if layout is not None:
+                layouts[chain.sha256] = layout
         if not added:
             return CompileResult(tree=tree, added=(), skipped=tuple(skipped), changed=False)
         entry = {
@@ -601,6 +621,7 @@ def compile_logs(
                     "sha256": c.sha256,
                     "fragments": len(c.smcs),
                     **({"at": c.at} if c.at is not None else {}),
+                    **({"layout": layouts[c.sha256]} if c.sha256 in layouts else {}),
                 }
                 for c in added
             ],

@@ -200,7 +200,8 @@ def record_episodes(
         i = 0
         while i < cfg.episodes:
             seed = cfg.seed + i
-            sim.reset(layout_of(seed))
+            layout = layout_of(seed)
+            sim.reset(layout)
             if keyboard is not None:
                 keyboard.reset((i + 1, cfg.episodes) if cfg.episodes > 1 else None)
                 operator: ScriptOperator | KeyboardOperator = keyboard
@@ -211,6 +212,8 @@ def record_episodes(
             ep_extra = {
                 **extra,
                 **({"episode": f"{i + 1}/{cfg.episodes}"} if cfg.episodes > 1 else {}),
+                # Where the objects started (reports only: a campaign's distance bands).
+                "layout": json.dumps({k: [float(x) for x in v] for k, v in layout.items()}),
             }
             wall0 = time.perf_counter()
             try:
