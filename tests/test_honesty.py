@@ -188,3 +188,25 @@ def test_the_audit_catches_a_read_of_the_simulator(trees, monkeypatch):
     object.__setattr__(sim, "watching", True)
     episode(tree, scene, layout_for(scene, 3), sim=sim, evaluate=lambda s: None)
     assert (__name__, "data") in _violations(object.__getattribute__(sim, "reads"))
+
+
+def test_control_never_reads_where_the_demonstrations_started() -> None:
+    """The tree's history keeps each demonstration's start layout for the campaign's
+    distance bands: the simulator's truth about the demonstration. No control module
+    touches the history (the executor, the policy, the matching, the sensing facade)."""
+    import ast
+
+    root = Path(__file__).resolve().parent.parent / "smccli"
+    control = [root / "execute" / f"{m}.py" for m in ("executor", "policy", "sensing")] + [
+        root / "learn" / "contingency.py",
+        *sorted((root / "perception").glob("*.py")),
+    ]
+    for path in control:
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        reads = [
+            n.lineno
+            for n in ast.walk(tree)
+            if (isinstance(n, ast.Attribute) and n.attr == "history")
+            or (isinstance(n, ast.Constant) and n.value == "history")
+        ]
+        assert not reads, f"{path}: reads the tree's history at lines {reads}"
