@@ -188,7 +188,7 @@ def record(
 
         summaries = record_episodes(cfg, on_status=status, on_message=say)
     for summary in summaries:
-        _print_summary(summary)
+        _print_summary(summary, scene)
     summary = summaries[-1]
     if summary.interrupted:
         say(
@@ -205,7 +205,7 @@ def _band_cell(band: dict | None) -> str:
     return f"{band['trials']}, {100 * band['success_rate']:.0f}"
 
 
-def _print_summary(summary) -> None:
+def _print_summary(summary, scene: str) -> None:
     out.print(
         f"[bold green]wrote[/] {escape(str(summary.path))}  ({summary.size_bytes / 1e6:.2f} MB, "
         f"{summary.duration:.1f} s, {summary.fragments} fragment(s) marked)"
@@ -219,8 +219,12 @@ def _print_summary(summary) -> None:
         out.print("[green]task achieved[/]")
     elif task.get("success") is False:
         warn(f"{summary.path}: the demonstration failed its task ({task.get('reason')})")
-    for warning in summary.warnings:
-        warn(warning)
+    if summary.interrupted is None:  # what compile will say about it, said now
+        from smccli.learn.compile import demonstration_warnings
+        from smccli.world.scene import load_scene
+
+        for warning in demonstration_warnings(summary.path, load_scene(scene)):
+            warn(warning)
 
 
 @app.command("compile")

@@ -199,6 +199,17 @@ def extract_chain(
     )
 
 
+def demonstration_warnings(path: Path, scene: Scene) -> tuple[str, ...]:
+    """What compile will warn about a demonstration just recorded in ``scene`` (an object
+    the crop box cuts, a fragment ending far from any object...), or the one line it would
+    refuse it with: said by ``smc record`` while the operator is still there."""
+    try:
+        log = read_log(path, topics=tp.READ_TOPICS, lazy_frames=True)
+        return extract_chain(log, scene_params(scene), SegmentMode.markers, scene).warnings
+    except SmcError as e:
+        return (f"compile would refuse it: {e}",)
+
+
 def _action(
     log: Log, frag: Fragment, cluster: Cluster | None, held_symmetry: float, params: SmcParams
 ) -> Action:

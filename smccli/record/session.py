@@ -100,9 +100,6 @@ class RecordSummary:
     """Why the recording stopped early (``SIGINT``, ``SIGTERM``), or None if it finished."""
     task: dict | None = None
     """The log's task verdict (``smc_end``): ``{success, reason, criteria}``."""
-    warnings: tuple[str, ...] = ()
-    """What compile will warn about this demonstration (an object the crop box cuts, a
-    fragment ending far from any object...), said while the operator is still there."""
 
 
 def _metadata(scene: Scene, cfg: RecordConfig, extra: dict[str, str]) -> dict[str, str]:
@@ -225,9 +222,7 @@ def record_episodes(
                     raise
                 say(f"episode {i + 1}/{cfg.episodes} discarded; recording it again")
                 continue
-            summary = _summary(
-                outs[i], sim.t, time.perf_counter() - wall0, marks, interrupted, scene
-            )
+            summary = _summary(outs[i], sim.t, time.perf_counter() - wall0, marks, interrupted)
             summaries.append(summary)
             verdict = task_line(summary.task)
             if keyboard is not None:
@@ -255,10 +250,10 @@ def record_episodes(
 
 
 def _summary(
-    out: Path, duration: float, wall: float, marks: int, interrupted: str | None, scene: Scene
+    out: Path, duration: float, wall: float, marks: int, interrupted: str | None
 ) -> RecordSummary:
     summary = log_summary(out)
-    task, warnings = _compile_check(out, scene)
+    task = _task(out)
     return RecordSummary(
         path=out,
         duration=duration,
@@ -268,25 +263,14 @@ def _summary(
         size_bytes=out.stat().st_size,
         interrupted=interrupted,
         task=task,
-        warnings=warnings,
     )
 
 
-def _compile_check(out: Path, scene: Scene) -> tuple[dict | None, tuple[str, ...]]:
-    """The log's task verdict and what compile's extraction warns about it (as doctor's
-    ``smcs`` row), or why it could not be extracted."""
-    from smccli.errors import SmcError
-    from smccli.learn.compile import extract_chain, scene_params
-    from smccli.learn.segmentation import SegmentMode
+def _task(out: Path) -> dict | None:
+    """The task verdict the log's ``smc_end`` record holds (:func:`task_outcome`)."""
     from smccli.logs import read_log
-    from smccli.logs import topics as tp
 
-    try:
-        log = read_log(out, topics=tp.READ_TOPICS, lazy_frames=True)
-        chain = extract_chain(log, scene_params(scene), SegmentMode.markers, scene)
-    except SmcError as e:
-        return None, (f"compile would refuse it: {e}",)
-    return log.task, chain.warnings
+    return read_log(out, topics=()).task
 
 
 def record_session(
