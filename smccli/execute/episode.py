@@ -303,7 +303,9 @@ def episode(
             executor = TreeExecutor(load_tree(teach.tree_path), sensors, speed=speed)
             outcome, reason, more_d, more_a, more_p = executor.run(start=taught.end)
             decisions, actions, path = decisions + more_d, actions + more_a, path + more_p
-        duration = sim.t - t0
+        # The task ends with its last action: the retreat after a last release
+        # (executor.RETREAT) is clearing away, as the demonstration's after its last mark.
+        duration = (actions[-1].t1 if outcome == "success" and actions else sim.t) - t0
         if outcome == "success":
             for _ in range(round(FINAL_SETTLE / sim.control_period)):
                 executor.hold()
