@@ -82,12 +82,18 @@ TopicsOption = Annotated[
 
 
 @app.command()
-def scenes() -> None:
-    """List the built-in scenes and their objects."""
-    from smccli.world.scene import list_scenes
+def scenes(
+    files: Annotated[
+        list[Path] | None,
+        typer.Argument(help="Scene files of your own (scene.yaml) to check and list too."),
+    ] = None,
+) -> None:
+    """List the built-in scenes (and check your own): robot, objects, variants, sensors."""
+    from smccli.world.scene import list_scenes, load_scene
 
+    found = list_scenes() + [load_scene(f) for f in files or []]
     table = Table("scene", "robot", "objects", "variants", "sensors", "task")
-    for s in list_scenes():
+    for s in found:
         sensors = [f"camera {s.camera.width}x{s.camera.height} @ {s.camera.rate:g} Hz"]
         if s.scale:
             sensors.append(f"scale ({s.scale})")
@@ -346,10 +352,14 @@ def _print_episode(result: EpisodeResult) -> None:
         )
         table.add_row("/".join(d.nodes), d.chosen or "-", cands, goal, f"{1e3 * d.latency_s:.1f}")
     out.print(table)
-    ratio = result.duration / result.demo_duration if result.demo_duration else float("nan")
+    # A path the tree did not take to a leaf (stopped, or taught) has no demonstrated time.
+    demo = (
+        f"demonstration {result.demo_duration:.2f} s, x{result.duration / result.demo_duration:.2f}"
+        if result.demo_duration
+        else "no demonstrated path to compare"
+    )
     out.print(
-        f"task {result.duration:.2f} s (demonstration {result.demo_duration:.2f} s, "
-        f"x{ratio:.2f}); wall {result.wall_time:.2f} s"
+        f"task {result.duration:.2f} s ({demo}); wall {result.wall_time:.2f} s"
         + (f"; log {result.output}" if result.output else "")
     )
     if result.taught is not None:

@@ -243,3 +243,29 @@ def test_top_level_errors_name_key_and_line() -> None:
 def test_variant_null_means_the_default() -> None:
     script = parse_script("scene: pick_place\nvariant: null\nsteps:\n  - wait: 1\n")
     assert script.variant is None and script.steps[0].line == 4
+
+
+def test_a_scripts_scene_path_names_the_scene_a_tree_carries(tmp_path: Path) -> None:
+    """replay --teach without --scene runs the scene the tree keeps (no file): a script
+    whose ``scene:`` is a path still names it when that file holds the same scene, and
+    not once the file changed."""
+    from smccli.record.operators import _names_scene, load_script
+    from smccli.world.scene import load_scene_from_text
+
+    src = Path(__file__).resolve().parent / "scenes" / "mug_place"
+    folder = tmp_path / "mug"
+    folder.mkdir()
+    for name in ("scene.yaml", "scene.xml"):
+        (folder / name).write_text((src / name).read_text())
+    script_text = (src / "demo.yaml").read_text()
+    first = next(line for line in script_text.splitlines() if line.startswith("scene:"))
+    (folder / "demo.yaml").write_text(script_text.replace(first, "scene: scene.yaml"))
+    on_disk = load_scene(folder / "scene.yaml")
+    carried = load_scene_from_text(on_disk.yaml_text, on_disk.mjcf, on_disk.robot.yaml_text)
+    assert carried.yaml_path is None and carried.digest == on_disk.digest
+    script = load_script(folder / "demo.yaml")
+    assert _names_scene(script, carried)
+    (folder / "scene.yaml").write_text(
+        on_disk.yaml_text.replace("description:", "# x\ndescription:")
+    )
+    assert not _names_scene(script, carried)

@@ -20,12 +20,12 @@ from typing import Any
 
 import numpy as np
 
-from smccli.errors import ScriptError
+from smccli.errors import ScriptError, SmcError
 from smccli.schemas import SchemaProblem, YamlDocument, check_yaml, key_path, parse_yaml
 from smccli.world.controller import home_poi, reach_problem
 from smccli.world.geometry import between, compose, near, wrap
 from smccli.world.layout import nominal_layout, sample_layout
-from smccli.world.scene import ROBOT_KEY, Layout, Scene
+from smccli.world.scene import ROBOT_KEY, Layout, Scene, load_scene
 from smccli.world.sensors import PoiCommand, SaliencyMark
 from smccli.world.sim import Sim
 
@@ -496,11 +496,18 @@ def _names_scene(script: Script, scene: Scene) -> bool:
     path read from the script's folder (as the script's author wrote it)."""
     if script.scene == scene.name:
         return True
-    if scene.yaml_path is None:
-        return False
     given = Path(script.scene)
     if not given.is_absolute() and script.source:
         given = Path(script.source).parent / given
+    if scene.yaml_path is None:
+        # The scene a tree carries (replay --teach without --scene) has no file: the
+        # script's scene file, where it still is, names it when it is the same scene.
+        if not given.is_file():
+            return False
+        try:
+            return load_scene(given).digest == scene.digest
+        except SmcError:
+            return False
     return given.resolve() == Path(scene.yaml_path).resolve() or script.scene == str(
         scene.yaml_path
     )
