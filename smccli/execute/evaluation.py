@@ -21,6 +21,7 @@ OUTCOMES = (
     "grasp_missed",
     "object_dropped",
     "placed_outside",
+    "task_incomplete",
     "collision",
     "wrong_room",
     "goal_missed",
@@ -29,8 +30,9 @@ OUTCOMES = (
 )
 """Episode outcomes: success, the three control stops, then the failure causes found at
 evaluation time from the trace and the final state (an arm's: grasp_missed,
-object_dropped, placed_outside; a mobile base's: collision, wrong_room, goal_missed; a
-mobile manipulator's, before its object's: handle_slipped, door_not_opened)."""
+object_dropped, placed_outside, task_incomplete; a mobile base's: collision, wrong_room,
+goal_missed; a mobile manipulator's, before its object's: handle_slipped,
+door_not_opened)."""
 
 SLIP_TIME = 0.2
 """A handle held by both fingers, lost for this long while the hand stays closed, slipped [s]."""
@@ -130,7 +132,9 @@ def score(
         elif not ok and scene.robot.base is not None and not scene.robot.arm_joints:
             outcome = classify_base_failure(scene, sim, final[ROBOT_KEY])
         elif not ok:
-            outcome = classify_failure(scene, layout, final, actions, obj)
+            outcome = incomplete_task(scene, sim, layout, final) or classify_failure(
+                scene, layout, final, actions, obj
+            )
     if not ok and scene.doors:
         # The first cause: a slipped handle leaves its door shut and the base runs into it.
         closed = [d.name for d in scene.doors if sim.door_opening(d.joint) < d.open]
@@ -171,6 +175,33 @@ def classify_base_failure(scene: Scene, sim: Sim, final: Sequence[float]) -> str
     return "goal_missed"
 
 
+def incomplete_task(
+    scene: Scene, sim: Sim, layout: Layout, final: dict[str, list[float]]
+) -> str | None:
+    """``task_incomplete`` when the tree reached its leaf with part of the task done: some
+    of a criterion's conditions hold and the objects of those that do not never moved
+    (under 2 cm), i.e. the tree was taught less than the task (half of a two-object task
+    scored with ``all_of``), not an action that went wrong; else None."""
+    for crit in scene.success:
+        if crit.variant is not None and not sim.shows(crit.variant):
+            continue
+        conds = [c for c in crit.conditions() if c.relation != "at" and c.object in layout]
+        held = [bool(sim.holds(c)[0]) for c in conds]
+        left = [c.object for c, h in zip(conds, held, strict=True) if not h]
+        if (
+            any(held)
+            and left
+            and all(math.dist(layout[o][:2], final[o][:2]) < UNMOVED for o in left)
+        ):
+            return "task_incomplete"
+    return None
+
+
+UNMOVED = 0.02
+"""An object that ends nearer its start than this [m] was not moved (its grasp missed, or
+nothing went for it)."""
+
+
 def classify_failure(
     scene: Scene,
     layout: Layout,
@@ -190,7 +221,7 @@ def classify_failure(
         return "grasp_missed"
     if obj is None:
         return "placed_outside"
-    if math.dist(layout[obj][:2], final[obj][:2]) < 0.02:
+    if math.dist(layout[obj][:2], final[obj][:2]) < UNMOVED:
         return "grasp_missed"
     opens = [a for a in actions if a.event == "open"]
     if any(a.opening_before < EMPTY_GRIP for a in opens):
