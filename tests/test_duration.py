@@ -136,12 +136,40 @@ def pausing(tmp_path_factory) -> tuple[Path, Path, float]:
     return log, tree, frags[-1].t1 + frags[-1].idle_tail
 
 
+def test_trees_from_before_squeezing_load_unsqueezed():
+    doc = params_to_dict(SmcParams())
+    assert doc["idle"]["squeeze"] is True
+    old = {**doc, "idle": {k: v for k, v in doc["idle"].items() if k != "squeeze"}}
+    params = params_from_dict(SmcParams, old)
+    assert params.idle.trim is True and params.idle.squeeze is False
+    assert "squeeze" not in params_to_dict(params)["idle"]  # its digest stays
+
+
+def test_waits_inside_fragments_are_cut_from_the_dmps(pausing, tmp_path):
+    """The pausing demo waits 1 s between the moves of each fragment: its DMPs last the
+    moves alone (each wait cut to IdleParams.keep), where without squeezing they last
+    the whole trimmed fragment, waits included."""
+    log, tree_path, _ = pausing
+    tree = load_tree(tree_path)
+    squeezed = sum(e.smc.action.dmp.duration for e in tree.edges)
+    trimmed = sum(s.t1 - s.t0 for e in tree.edges for s in e.sources)
+    plain = tmp_path / "plain.json"
+    compile_logs([log], plain, overrides=["idle.squeeze=false"])
+    unsqueezed = sum(e.smc.action.dmp.duration for e in load_tree(plain).edges)
+    assert unsqueezed == pytest.approx(trimmed, abs=0.05)
+    # Five waits of 1-1.33 s lie between moves inside the two fragments (5.3 s); the
+    # windows' edges keep a little of each.
+    assert squeezed < trimmed - 3.0, (squeezed, trimmed)
+
+
 def test_a_pausing_demo_replays_faster_than_demonstrated(pausing):
     _, tree, demo = pausing
     r = run_episode(tree, seed=0)
     assert r.success, r.reason
     assert r.duration < demo
     assert r.duration < 0.9 * demo  # the waits are gone, not just shaved
+    # ... those inside the fragments too: faster than the demonstrated motion itself.
+    assert r.duration < 0.8 * r.demo_duration, (r.duration, r.demo_duration)
 
 
 def test_a_small_campaign_of_the_pausing_tree_succeeds(pausing, tmp_path):

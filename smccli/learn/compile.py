@@ -41,6 +41,7 @@ from smccli.learn.smc import (
     action_from_path,
 )
 from smccli.learn.tree import FORMAT, ROOT, Tree, digest, insert_chain, load_tree, save_tree
+from smccli.learn.trim import active_times, idle_centres
 from smccli.logs import Log, read_log
 from smccli.logs import topics as tp
 from smccli.logs.robot import geometry_at, robot_model_of
@@ -220,6 +221,9 @@ def _action(
     t = np.array([c.t for c in cmds]) - cmds[0].t
     path = np.array([c.target for c in cmds], dtype=float)
     grip = np.array([c.gripper for c in cmds])
+    if params.idle.squeeze:  # the DMP and the gripper phase on the clock of the motion
+        idle = idle_centres(t, path, grip, None, params.idle)
+        t = active_times(t, idle, params.idle, keep=params.idle.keep)
     return action_from_path(t, path, grip, cluster, params, held_symmetry=held_symmetry)
 
 

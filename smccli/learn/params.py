@@ -56,7 +56,7 @@ class SmcParams:
     auto_gap: float = 4.0
     """With ``--segment both``, automatic cuts only fill unmarked stretches longer than this [s]."""
     idle: IdleParams = field(
-        default_factory=IdleParams, metadata={"legacy": IdleParams(trim=False)}
+        default_factory=IdleParams, metadata={"legacy": IdleParams(trim=False, squeeze=False)}
     )
     """Trimming of fragments' idle heads and tails (:mod:`smccli.learn.trim`); a tree
     without this key was compiled untrimmed."""

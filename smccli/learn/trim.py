@@ -26,14 +26,17 @@ snapping of :mod:`smccli.learn.segmentation`) the scene changes, so they are rea
 the same scene. The fragment's end is where its POI stopped, so the salient perception
 found there (eq. 22) is the same.
 
-Pauses *inside* a fragment are left alone here: removing them means re-timing the commands
-before the DMP and the gripper phase are computed, which compile does from the raw
-command times (:func:`active_times` gives the re-timed clock).
+Pauses *inside* a fragment (a person waiting between the approach moves) are cut down to
+``keep`` by re-timing the fragment's commands before its DMP and gripper phase are fitted
+(:func:`active_times`, used by compile with ``squeeze``): the path is the same, its clock
+runs only while the command moves. A hesitation shorter than the window never makes an
+idle centre (the window sees the moves on both sides), so scripted demonstrations, whose
+hesitations last at most 0.2 s, keep their clock.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -59,6 +62,14 @@ class IdleParams:
     min_idle: float = 0.2
     """An idle head or tail shorter than this is kept [s]: a scripted demonstration's
     fragments (which start moving at once) stay as they were."""
+    squeeze: bool = field(default=True, metadata={"legacy": False})
+    """Cut each pause *inside* a fragment (an idle run of at least ``min_idle``) down to
+    ``keep`` before its DMP and gripper phase are fitted (:func:`active_times`), so the
+    robot replays the motions back to back; a tree without this key was compiled without
+    (an arm's fragments; a mobile manipulator's keep their clock: its base and hand DMPs
+    share one duration)."""
+    keep: float = field(default=0.1, metadata={"omit_default": True})
+    """What is left of a squeezed pause [s]: the command's standstill between two moves."""
 
 
 def idle_centres(
