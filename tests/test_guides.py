@@ -54,16 +54,12 @@ def test_a_crop_box_that_cuts_an_object_is_warned_by_record_doctor_and_compile(
     assert "perception" not in scene.read_text()  # the guide's scene sets no crop
     scene.write_text(scene.read_text() + "perception:\n  crop_min: [0.12, -0.65, -0.05]\n")
     said = "reaches the crop box's x_min face (x = 0.120 m)"
-    proc = smc(
-        "record",
-        "--scene",
-        scene,
-        "--script",
-        files["five_pick/demo.yaml"],
-        "-o",
-        "d.mcap",
-        cwd=tmp_path,
-    )
+
+    def record(out: str):
+        demo = files["five_pick/demo.yaml"]
+        return smc("record", "--scene", scene, "--script", demo, "-o", out, cwd=tmp_path)
+
+    proc = record("d.mcap")
     assert proc.returncode == 0 and said in proc.stderr and "perception.crop_min" in proc.stderr, (
         proc.stderr
     )
@@ -73,14 +69,5 @@ def test_a_crop_box_that_cuts_an_object_is_warned_by_record_doctor_and_compile(
     assert proc.returncode == 0 and said in proc.stderr, proc.stderr
     # Without the scene's box the cube is whole: no warning at all.
     scene.write_text(scene.read_text().split("perception:")[0])
-    proc = smc(
-        "record",
-        "--scene",
-        scene,
-        "--script",
-        files["five_pick/demo.yaml"],
-        "-o",
-        "e.mcap",
-        cwd=tmp_path,
-    )
+    proc = record("e.mcap")
     assert proc.returncode == 0 and "warning" not in proc.stderr, proc.stderr
