@@ -71,3 +71,21 @@ def test_a_crop_box_that_cuts_an_object_is_warned_by_record_doctor_and_compile(
     scene.write_text(scene.read_text().split("perception:")[0])
     proc = record("e.mcap")
     assert proc.returncode == 0 and "warning" not in proc.stderr, proc.stderr
+
+
+def test_replay_notes_a_scene_file_edited_after_teaching(tmp_path: Path) -> None:
+    """Without --scene a tree runs the copy of its scene it carries; once the scene file it
+    was taught from has changed, replay says so (and --scene runs the file as it is)."""
+    files = write_guide_files(GUIDES["own_arm"], tmp_path)
+    scene, demo = files["five_pick/scene.yaml"], files["five_pick/demo.yaml"]
+    assert (
+        smc("record", "--scene", scene, "--script", demo, "-o", "d.mcap", cwd=tmp_path).returncode
+        == 0
+    )
+    assert smc("compile", "d.mcap", "-o", "t.json", cwd=tmp_path).returncode == 0
+    proc = smc("replay", "t.json", cwd=tmp_path)
+    assert proc.returncode == 0 and "has changed since" not in proc.stdout + proc.stderr
+    scene.write_text(scene.read_text().replace("x: [0.09, 0.14]", "x: [0.09, 0.16]"))
+    proc = smc("replay", "t.json", cwd=tmp_path)
+    said = f"{scene.resolve()} has changed since (--scene to run it as it is now)"
+    assert proc.returncode == 0 and said in proc.stdout + proc.stderr, proc.stdout + proc.stderr

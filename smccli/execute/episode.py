@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from smccli.errors import OutputError, SceneError, TreeError
+from smccli.errors import OutputError, SceneError, SmcError, TreeError
 from smccli.execute.evaluation import HandleWatch, score
 from smccli.execute.executor import ActionTrace, Decision, TreeExecutor, check_speed
 from smccli.execute.replay_log import ReplayLog
@@ -217,6 +217,18 @@ def scene_note(tree: Tree, scene: Scene) -> str | None:
             f"taught in another version of scene {tree_scene!r} (digest {taught[:19]}), "
             f"running in {scene.digest[:19]} (same robot {scene.robot.name!r} and sensors)"
         )
+    path = Path(str(tree.scene.get("path", ""))) if tree.scene else None
+    if scene.yaml_path is None and path is not None and path.is_file():
+        # The tree's own copy runs; the file it came from was edited since.
+        try:
+            changed = load_scene(path).digest != scene.digest
+        except SmcError:
+            changed = True
+        if changed:
+            return (
+                f"running scene {tree_scene!r} as it was taught; {path} has changed since "
+                "(--scene to run it as it is now)"
+            )
     return None
 
 

@@ -617,6 +617,11 @@ def compile_logs(
                         "log": r.sha256,
                         "sensors": r.sensors,
                         "files": r.scene_files,
+                        **(
+                            {"path": r.metadata["scene_path"]}
+                            if r.metadata.get("scene_path")
+                            else {}
+                        ),
                     },
                     robot=robot,
                 )

@@ -114,6 +114,8 @@ def _metadata(scene: Scene, cfg: RecordConfig, extra: dict[str, str]) -> dict[st
         "state_rate_hz": "100",
         "camera_rate_hz": f"{scene.camera.rate:g}",
         "has_scale": "true" if scene.scale else "false",
+        # Where the scene file was: replay notes when it changed after the tree was taught.
+        **({"scene_path": str(scene.yaml_path.resolve())} if scene.yaml_path else {}),
         **extra,
     }
 
