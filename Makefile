@@ -79,6 +79,7 @@ bench: setup
 	$(PY) -m smccli.bench.paper
 	$(PY) -m smccli.bench.rooms
 	$(PY) -m smccli.bench.cluster
+	$(PY) -m smccli.bench.learning
 
 lint: setup
 	$(VENV)/bin/ruff check smccli tests
