@@ -121,7 +121,8 @@ def robots(
         gripper = (
             "none"
             if g is None
-            else f"{len(g.joints)} fingers, {g.closed:g}-{g.open:g} per finger ({g.actuator})"
+            else f"{len(g.joints)} finger{'s' if len(g.joints) != 1 else ''}, "
+            f"{g.closed:g}-{g.open:g} per finger ({g.actuator})"
         )
         mounted = [f"{s.type} {s.name}" for s in r.sensors]
         sensors = ", ".join(["joint encoders", *mounted])
