@@ -10,7 +10,8 @@ from their own random layouts through the realistic sensors, in a scene with ach
 look-alikes of the white box (``scenes/bench_pick_lookalike``). The trees of the first 1,
 2, 4 and 8 of them run one campaign each on the same seed (the same layouts). Writes
 ``docs/bench_learning.json`` and ``docs/img/bench_learning.png`` (success with Wilson 95 %
-intervals).
+intervals), and first the margin the look-alikes leave: D_P of the white box against
+itself and against each of them over random layouts (:func:`lookalike_separability`).
 """
 
 from __future__ import annotations
@@ -94,6 +95,50 @@ def record_demos(work: Path, n: int) -> list[Path]:
     return logs
 
 
+def lookalike_separability(n_layouts: int, seed: int = 5) -> dict[str, Any]:
+    """D_P (cluster part) of the white box against itself and against each look-alike over
+    ``n_layouts`` random layouts of the scene, each through its own draw of the realistic
+    sensors (exposure, white balance, noise): the margin part 1 of issue 27 is about. The
+    layout's truth only pairs each cluster with its object (evaluation's side)."""
+    import itertools
+
+    from smccli.perception import clusters_from_frame, d_cluster
+    from smccli.perception.params import scene_perception
+    from smccli.world.layout import sample_layout
+    from smccli.world.scene import load_scene
+    from smccli.world.sim import Sim
+
+    scene = load_scene(SCENE)
+    params = scene_perception(scene)
+    rng = np.random.default_rng(seed)
+    seen: dict[str, list[Any]] = {"white_box": [], "grey_bar": [], "cream_box": []}
+    sim = None
+    for i in range(n_layouts):
+        layout = sample_layout(scene, rng)
+        sim = sim or Sim(scene, layout)
+        sim.reset(layout, noise_seed=i)
+        clusters = clusters_from_frame(sim.render_camera(), sim.robot_geometry(), params)
+        for name, found in seen.items():
+            xy = np.array(layout[name][:2])
+            near = [c for c in clusters if np.hypot(*(c.centroid[:2] - xy)) < 0.03]
+            if len(near) == 1:
+                found.append(near[0])
+    if sim is not None:
+        sim.close()
+    white = seen["white_box"]
+    same = [d_cluster(a, b, params) for a, b in itertools.combinations(white, 2)]
+    out: dict[str, Any] = {
+        "layouts": n_layouts,
+        "white_box_views": len(white),
+        "same_max": max(same),
+        "same_p99": float(np.percentile(same, 99)),
+    }
+    for other in ("grey_bar", "cream_box"):
+        d = [d_cluster(a, b, params) for a in white for b in seen[other]]
+        out[other] = {"views": len(seen[other]), "min": min(d), "p1": float(np.percentile(d, 1))}
+    return out
+
+
 def figure(rows: list[dict[str, Any]], out: Path) -> str:
     """Success [%] against demonstrations merged, with Wilson 95 % intervals."""
     import matplotlib
@@ -127,12 +172,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--trials", type=int, default=100)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--separability-layouts", type=int, default=30)
     ap.add_argument("--out", type=Path, default=REPO / "docs" / "bench_learning.json")
     ap.add_argument("--fig", type=Path, default=REPO / "docs" / "img" / "bench_learning.png")
     args = ap.parse_args(argv)
     from smccli.learn.compile import compile_logs
 
     meta = machine()
+    sep = lookalike_separability(args.separability_layouts)
+    print(
+        f"D_P white box to itself: max {sep['same_max']:.3f}; to the grey bar: min "
+        f"{sep['grey_bar']['min']:.3f}; to the cream box: min {sep['cream_box']['min']:.3f}",
+        flush=True,
+    )
     rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
@@ -163,6 +215,7 @@ def main(argv: list[str] | None = None) -> int:
         scene=str(SCENE.relative_to(REPO)),
         scripts=scripts,
         redone=redone,
+        separability=sep,
         figure=str(Path(figure(rows, args.fig)).resolve().relative_to(REPO)),
     )
     return 0
