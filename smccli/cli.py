@@ -23,6 +23,7 @@ if TYPE_CHECKING:
     from smccli.execute.episode import EpisodeResult
     from smccli.execute.teach import TeachConfig
     from smccli.learn.tree import Tree as LearnedTree
+    from smccli.world.scene import Scene
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -194,8 +195,11 @@ def record(
                 next_line[0] += 1.0
 
         summaries = record_episodes(cfg, on_status=status, on_message=say)
+    from smccli.world.scene import load_scene
+
+    recorded_in = load_scene(scene)
     for summary in summaries:
-        _print_summary(summary, scene)
+        _print_summary(summary, recorded_in)
     summary = summaries[-1]
     if summary.interrupted:
         say(
@@ -212,7 +216,7 @@ def _band_cell(band: dict | None) -> str:
     return f"{band['trials']}, {100 * band['success_rate']:.0f}"
 
 
-def _print_summary(summary, scene: str) -> None:
+def _print_summary(summary, scene: Scene) -> None:
     out.print(
         f"[bold green]wrote[/] {escape(str(summary.path))}  ({summary.size_bytes / 1e6:.2f} MB, "
         f"{summary.duration:.1f} s, {summary.fragments} fragment(s) marked)"
@@ -228,9 +232,8 @@ def _print_summary(summary, scene: str) -> None:
         warn(f"{summary.path}: the demonstration failed its task ({task.get('reason')})")
     if summary.interrupted is None:  # what compile will say about it, said now
         from smccli.learn.compile import demonstration_warnings
-        from smccli.world.scene import load_scene
 
-        for warning in demonstration_warnings(summary.path, load_scene(scene)):
+        for warning in demonstration_warnings(summary.path, scene):
             warn(warning)
 
 

@@ -116,31 +116,26 @@ def test_any_of_keeps_its_meaning(tmp_path: Path) -> None:
         sim.close()
 
 
+def _pick_and_place(obj: str, target: str, release_height: float) -> list[dict]:
+    """Teleop steps: grasp ``obj`` from above, release it ``release_height`` above the
+    centre of ``target`` [m], back off."""
+    return [
+        {"move_to": {"object": obj, "offset": [0, 0, 0.12]}},
+        {"move_to": {"object": obj, "offset": [0, 0, 0.0]}},
+        {"gripper": "close"},
+        {"mark": "grasp"},
+        {"move_to": {"object": obj, "offset": [0, 0, 0.15]}},
+        {"move_to": {"object": target, "offset": [0, 0, 0.17]}},
+        {"move_to": {"object": target, "offset": [0, 0, release_height]}},
+        {"gripper": "open"},
+        {"mark": "release"},
+        {"move_to": {"object": target, "offset": [0, 0, 0.2]}},
+    ]
+
+
 SCRIPT_STEPS = {
-    "cube": [
-        {"move_to": {"object": "orange_cube", "offset": [0, 0, 0.12]}},
-        {"move_to": {"object": "orange_cube", "offset": [0, 0, 0.0]}},
-        {"gripper": "close"},
-        {"mark": "grasp"},
-        {"move_to": {"object": "orange_cube", "offset": [0, 0, 0.15]}},
-        {"move_to": {"object": "green_cylinder", "offset": [0, 0, 0.17]}},
-        {"move_to": {"object": "green_cylinder", "offset": [0, 0, 0.068]}},
-        {"gripper": "open"},
-        {"mark": "release"},
-        {"move_to": {"object": "green_cylinder", "offset": [0, 0, 0.2]}},
-    ],
-    "pyramid": [
-        {"move_to": {"object": "grey_pyramid", "offset": [0, 0, 0.12]}},
-        {"move_to": {"object": "grey_pyramid", "offset": [0, 0, 0.0]}},
-        {"gripper": "close"},
-        {"mark": "grasp"},
-        {"move_to": {"object": "grey_pyramid", "offset": [0, 0, 0.15]}},
-        {"move_to": {"object": "yellow_cylinder", "offset": [0, 0, 0.17]}},
-        {"move_to": {"object": "yellow_cylinder", "offset": [0, 0, 0.075]}},
-        {"gripper": "open"},
-        {"mark": "release"},
-        {"move_to": {"object": "yellow_cylinder", "offset": [0, 0, 0.2]}},
-    ],
+    "cube": _pick_and_place("orange_cube", "green_cylinder", 0.068),
+    "pyramid": _pick_and_place("grey_pyramid", "yellow_cylinder", 0.075),
 }
 
 

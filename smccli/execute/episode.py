@@ -72,9 +72,9 @@ class EpisodeResult:
     manipulated: str | None = None
     """The object the task moves (from the success criterion), for distance bands."""
     final_poses: dict[str, list[float]] = field(default_factory=dict)
+    """Object [x, y, z, yaw] at the end (evaluation)."""
     criteria: tuple[tuple[str, str, bool], ...] = ()
     """Every success condition tried at the leaf: (task, what it found, whether it held)."""
-    """Object [x, y, z, yaw] at the end (evaluation)."""
     output: Path | None = None
     """The replay log written, if any."""
     note: str | None = None
