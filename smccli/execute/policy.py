@@ -76,6 +76,8 @@ class EdgeStack:
     """(E, H): square root of each stored normalised histogram (zeros without a cluster)."""
     log_ext: np.ndarray
     """(E, 3): log of the stored extents, floored at 1 mm."""
+    log_brightness: np.ndarray
+    """(E,): log of the stored relative brightness (NaN without one)."""
     has_weight: np.ndarray
     """(E,) bool: the SMC has a scale reading."""
     weight: np.ndarray
@@ -88,8 +90,10 @@ class EdgeStack:
         size = next((len(c.histogram) for c in clusters if c is not None), 1)
         hist = np.zeros((len(edges), size))
         ext = np.zeros((len(edges), 3))
+        bright = np.full(len(edges), np.nan)
         for i, c in enumerate(clusters):
             if c is not None:
+                bright[i] = np.log(c.brightness)
                 h = np.asarray(c.histogram, dtype=np.float64)
                 hist[i] = np.sqrt(h / max(float(h.sum()), 1e-300))
                 ext[i] = np.log(np.maximum(np.asarray(c.extents, dtype=np.float64), MIN_EXTENT))
@@ -99,6 +103,7 @@ class EdgeStack:
             has_cluster=np.array([c is not None for c in clusters], dtype=bool),
             sqrt_hist=hist,
             log_ext=ext,
+            log_brightness=bright,
             has_weight=np.array([w is not None for w in weights], dtype=bool),
             weight=np.array([0.0 if w is None else float(w) for w in weights]),
         )
@@ -127,6 +132,11 @@ def match_edges(
             )
             d_e = np.abs(stack.log_ext[:, None, :] - ec[None, :, :]).max(axis=2)
             dc = d_h / pp.hist_scale + d_e / pp.extent_scale
+            if pp.brightness_scale > 0:
+                lb = np.log(np.array([c.brightness for c in clusters], dtype=np.float64))
+                d_b = np.abs(stack.log_brightness[:, None] - lb[None, :])
+                d_b = np.where(np.isnan(d_b), 0.0, d_b)  # no table, or a tree from before
+                dc = dc + d_b / pp.brightness_scale
             best = np.argmin(dc, axis=1)
             d = np.where(stack.has_cluster, dc[np.arange(n), best], 0.0)
             idx = np.where(stack.has_cluster, best, -1)

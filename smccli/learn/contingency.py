@@ -226,9 +226,17 @@ def _mean_cluster(a: Cluster, b: Cluster, wa: float, wb: float) -> Cluster:
     hist = hist / max(float(hist.sum()), 1e-12)
     period = a.yaw_period if a.yaw_period > 0 else 2 * math.pi
     yaw = a.yaw + wb / (wa + wb) * wrap(b.yaw - a.yaw, period)
+    # The geometric mean of the relative brightnesses (the term is a log-ratio); a tree
+    # from before the term keeps the one that has it.
+    if math.isnan(a.brightness) or math.isnan(b.brightness):
+        brightness = b.brightness if math.isnan(a.brightness) else a.brightness
+    else:
+        log_b = (wa * math.log(a.brightness) + wb * math.log(b.brightness)) / (wa + wb)
+        brightness = math.exp(log_b)
     return dataclasses.replace(
         a,
         histogram=hist,
+        brightness=brightness,
         extents=(wa * a.extents + wb * b.extents) / (wa + wb),
         centroid=(wa * a.centroid + wb * b.centroid) / (wa + wb),
         yaw=float(yaw),

@@ -228,7 +228,7 @@ def object_points(
     base pose ``[x, y, yaw]`` when the crop box is in its frame; with ``remove_walls``
     every big plane goes and no single table is returned (:func:`object_points_on_planes`).
     """
-    points, colors, planes = object_points_on_planes(frame, robot, params, base)
+    points, colors, planes, _ = object_points_on_planes(frame, robot, params, base)
     return points, colors, None if params.remove_walls else (planes[0] if planes else None)
 
 
@@ -237,19 +237,24 @@ def object_points_on_planes(
     robot: RobotGeometry | None,
     params: PerceptionParams,
     base: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], tuple[np.ndarray, np.ndarray]]:
     """As :func:`object_points`, with every support plane found: the table's (at most
-    one), or with ``remove_walls`` each near-horizontal plane removed."""
+    one), or with ``remove_walls`` each near-horizontal plane removed; and the table's own
+    points (m, 3) [m] and colours (m, 3) uint8, the reference of
+    :mod:`smccli.perception.brightness` (none with ``remove_walls``: shelves differ)."""
     points, colors = points_from_depth(frame, params.max_depth)
     keep = crop_mask(points, params, base)
     points, colors = points[keep], colors[keep]
     points, colors = voxel_downsample(points, colors, params.voxel_size)
+    table = (np.zeros((0, 3)), np.zeros((0, 3), dtype=np.uint8))
     if params.remove_walls:
         points, colors, planes = remove_planes(points, colors, params)
     else:
         plane = fit_table_plane(points, params)
         planes = [] if plane is None else [plane]
         if plane is not None:
+            on = np.abs(plane_distance(points, plane)) < params.plane_distance
+            table = (points[on], colors[on])
             keep = above_plane_mask(points, plane, params.plane_distance)
             points, colors = points[keep], colors[keep]
     if params.outlier_neighbours > 0 and len(points):
@@ -262,7 +267,7 @@ def object_points_on_planes(
     # Self-filter last: the table is most of the cloud, so this tests far fewer points
     # against the robot's spheres; the robot's few points do not sway the RANSAC plane.
     keep = self_filter_mask(points, robot)
-    return points[keep], colors[keep], planes
+    return points[keep], colors[keep], planes, table
 
 
 def cloud_from_frame(

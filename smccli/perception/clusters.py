@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields, replace
 from typing import Any
 
@@ -9,6 +10,7 @@ import cv2
 import numpy as np
 import open3d as o3d
 
+from smccli.perception.brightness import relative_brightness
 from smccli.perception.cloud import (
     crop_faces,
     in_crop_frame,
@@ -47,6 +49,10 @@ class Cluster:
     n_points: int
     """Number of points in the cluster (after the optional voxel downsampling); with it off,
     the object's area in the image [px]."""
+    brightness: float = math.nan
+    """Its side faces' brightness over the table's around it, dimensionless
+    (:mod:`smccli.perception.brightness`); NaN without a table to compare with, and in
+    trees from before it."""
     crop_faces: tuple[str, ...] = ()
     """Faces of the perception's crop box the cluster's points reach (``x_min``, ...,
     ``z_max``, within ``crop_touch``): the box may cut the object there. Not stored in
@@ -92,6 +98,12 @@ def _spread(d: np.ndarray) -> float:
     return float(np.sqrt(-2.0 * np.log(max(r, 1e-12))))
 
 
+def heights_above(points: np.ndarray, plane: np.ndarray | None) -> np.ndarray:
+    """Height of points (n, 3) above the table plane, shape (n,) [m]; without a plane,
+    above the lowest point."""
+    return plane_distance(points, plane) if plane is not None else points[:, 2] - points[:, 2].min()
+
+
 def describe_cluster(
     points: np.ndarray,
     colors: np.ndarray,
@@ -104,11 +116,7 @@ def describe_cluster(
     ``cut`` (n,) bool marks points whose pixel borders something hiding part of the object
     (:func:`cut_points`); None = nothing is hidden.
     """
-    # Height above the table: signed distance to the table plane.
-    if plane is not None:
-        heights = plane_distance(points, plane)
-    else:
-        heights = points[:, 2] - points[:, 2].min()
+    heights = heights_above(points, plane)
     height = float(heights.max())
     xy = points[:, :2].astype(np.float64)
     # The camera sees the top and the near sides only, so the visible footprint of e.g. a
@@ -354,7 +362,9 @@ def clusters_from_frame(
     mobile manipulator's ``base`` pose from odometry, where its crop box is).
     """
     params = params or PerceptionParams()
-    points, colors, planes = object_points_on_planes(frame, robot, params, base)
+    points, colors, planes, (table_points, table_colors) = object_points_on_planes(
+        frame, robot, params, base
+    )
     labels = attach_hidden_parts(points, cluster_labels(points, params), frame, params)
     cut = cut_points(points, labels, frame, params)
     found = []
@@ -368,6 +378,14 @@ def clusters_from_frame(
         else:
             plane = planes[0] if planes else None
         cluster = describe_cluster(points[idx], colors[idx], plane, params, cut[idx])
+        if params.brightness_scale > 0:
+            # Sides: well below the top layer, whose pixels a noisy depth scatters down.
+            heights = heights_above(points[idx], plane)
+            side = heights < heights.max() - 2 * params.top_band
+            brightness = relative_brightness(
+                points[idx], colors[idx], side, table_points, table_colors, params
+            )
+            cluster = replace(cluster, brightness=brightness)
         faces = crop_faces(
             in_crop_frame(points[idx], params, base),
             np.asarray(params.crop_min),
@@ -393,11 +411,15 @@ def _is_number(v: Any) -> bool:
 
 _STORED = tuple(f for f in fields(Cluster) if f.name != "crop_faces")
 """The fields a tree keeps: ``crop_faces`` is a warning about the frame it came from."""
+_OPTIONAL = {"brightness": math.nan}
+"""Stored fields a tree may lack (from before them), with the value they then take; a NaN
+is left out of the file (JSON has no NaN)."""
 
 
 def cluster_to_dict(c: Cluster) -> dict[str, Any]:
     """JSON-ready form of a cluster (lists of floats), for tree files and logs."""
-    return {f.name: _json(getattr(c, f.name)) for f in _STORED}
+    out = {f.name: _json(getattr(c, f.name)) for f in _STORED}
+    return {k: v for k, v in out.items() if not (k in _OPTIONAL and math.isnan(v))}
 
 
 def cluster_from_dict(data: dict[str, Any]) -> Cluster:
@@ -411,6 +433,8 @@ def cluster_from_dict(data: dict[str, Any]) -> Cluster:
 
     kwargs: dict[str, Any] = {}
     for f in _STORED:
+        if f.name not in data and f.name in _OPTIONAL:
+            continue
         v = data[f.name]
         if f.type == "np.ndarray":  # annotations are strings (``from __future__``)
             if not (isinstance(v, list) and all(_is_number(x) for x in v)):

@@ -83,6 +83,20 @@ class PerceptionParams:
     extent_scale: float = 2.5
     """Log-ratio of extents |ln(a/b)| that counts as "clearly different" (-> 1): T_hP = 0.1
     then sits at a 28 % size difference (with the colours equal)."""
+    brightness_ring: float = field(default=0.15, metadata={"omit_default": True})
+    """The table within this of an object's centre is its brightness reference [m]
+    (:mod:`smccli.perception.brightness`): the spot light falls off across the table."""
+    brightness_gap: float = field(default=0.015, metadata={"omit_default": True})
+    """Table points within this of the object's points are left out of its reference:
+    edge pixels mix the two surfaces [m]."""
+    brightness_scale: float = field(default=0.0, metadata={"omit_default": True})
+    """Log-ratio of relative brightnesses |ln(a/b)| that counts as "clearly different"
+    (-> 1); 0 = the term is off and not measured (the default). Turn it on (4) for a
+    camera whose exposure varies among achromatic look-alikes under a lamp from above:
+    measured in ``bench_pick_lookalike``, the white box against itself up to 0.36 (its
+    sides' shading turns with it), against the grey bar of its size 0.11-0.8. Under a
+    light from one side a box's sides differ by up to 3 times (the perception tests' lamp):
+    there it would split one object in two (:mod:`smccli.perception.brightness`)."""
     top_band: float = 0.008
     """Points within this of the top form the top layer, whose centre is the footprint's
     centre [m]."""
