@@ -53,8 +53,8 @@ def relative_brightness(
 
     ``points`` (n, 3) [m] and ``colors`` (n, 3) uint8 of the cluster, ``side`` (n,) bool
     its side faces' points (below the top layer by twice its band: a noisy depth scatters
-    top pixels down into it); ``table_points`` (m, 3) [m] and ``table_colors`` (m, 3) uint8 the table
-    plane's inliers in the same frame. Dimensionless, > 0; NaN without a reference.
+    top pixels down into it); ``table_points`` (m, 3) [m] and ``table_colors`` (m, 3)
+    uint8 the table plane's inliers in the same frame. Dimensionless, > 0; NaN without a reference.
     """
     if len(table_points) == 0 or len(points) == 0:
         return float("nan")
