@@ -63,16 +63,19 @@ def test_the_exposures_drawn_span_the_realistic_range(views):
 def test_white_is_brighter_than_grey_relative_to_the_table_in_every_frame(views):
     _, frames = views
     white = [f["white_box"].brightness for _, f in frames if "white_box" in f]
-    grey = [f["grey_bar"].brightness for _, f in frames if "grey_bar" in f]
-    assert len(white) >= 8 and len(grey) >= 8
-    # The box shows its sides in every view; the bar, seen end-on, not always (NaN: the
-    # term is then left out).
-    assert all(np.isfinite(white))
-    grey = [g for g in grey if np.isfinite(g)]
-    assert len(grey) >= 6
-    # Across frames of different exposures: every white view above every grey one.
-    assert min(white) > 1.05 * max(grey), (white, grey)
-    # And the same box stays itself: its spread is the shading of its sides as it turns.
+    both = [
+        (f["white_box"].brightness, f["grey_bar"].brightness)
+        for _, f in frames
+        if {"white_box", "grey_bar"} <= f.keys()
+    ]
+    assert len(white) >= 8 and len(both) >= 8
+    assert np.isfinite(white).all() and np.isfinite(both).all()
+    # In the same frame, whatever its exposure, the white box is the brighter one ...
+    assert all(w > 1.05 * g for w, g in both), both
+    # ... and across frames its median stays above the grey bar's (a single white view
+    # may fall below a grey bar seen from above, all top: its sides hidden).
+    assert np.median(white) > 1.3 * np.median([g for _, g in both]), (white, both)
+    # The same box stays itself: its spread is the shading of its sides as it turns.
     assert max(white) / min(white) < math.exp(0.4), white
 
 

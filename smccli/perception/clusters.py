@@ -379,9 +379,8 @@ def clusters_from_frame(
             plane = planes[0] if planes else None
         cluster = describe_cluster(points[idx], colors[idx], plane, params, cut[idx])
         if params.brightness_scale > 0:
-            # Sides: well below the top layer, whose pixels a noisy depth scatters down.
             heights = heights_above(points[idx], plane)
-            side = heights < heights.max() - 2 * params.top_band
+            side = heights <= heights.max() - params.top_band  # below the top layer
             brightness = relative_brightness(
                 points[idx], colors[idx], side, table_points, table_colors, params
             )
