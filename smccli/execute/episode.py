@@ -23,7 +23,13 @@ import numpy as np
 
 from smccli.errors import OutputError, SceneError, SmcError, TreeError
 from smccli.execute.evaluation import HandleWatch, score
-from smccli.execute.executor import ActionTrace, Decision, TreeExecutor, check_speed
+from smccli.execute.executor import (
+    LOOK_PERIOD,
+    ActionTrace,
+    Decision,
+    TreeExecutor,
+    check_speed,
+)
 from smccli.execute.replay_log import ReplayLog
 from smccli.execute.sensing import Sensors
 from smccli.execute.teach import TeachConfig, Teaching, check_teach
@@ -41,7 +47,7 @@ from smccli.world.scene import (
     sensor_identity,
 )
 from smccli.world.sensors import PoiCommand
-from smccli.world.sim import OdometryDrift, Sim
+from smccli.world.sim import OdometryDrift, Push, Sim
 
 FINAL_SETTLE = 1.0
 """Sim time the scene settles at a leaf before scoring [s]."""
@@ -260,6 +266,8 @@ def episode(
     teach: TeachConfig | None = None,
     speed: float = 1.0,
     sim: Sim | None = None,
+    push: Push | None = None,
+    look_period: float = LOOK_PERIOD,
 ) -> EpisodeResult:
     """Run Algorithm 2 once on ``layout`` and score it. ``evaluate`` runs first thing after
     control (tests use it to re-enable object queries); ``drift``: a mobile base's odometry
@@ -270,7 +278,9 @@ def episode(
     faster (the caller checks it, :func:`~smccli.execute.executor.check_speed`); ``sim``:
     a simulator of ``scene`` with ``drift`` to reset and keep open, instead of building
     one (campaign workers keep theirs: its renderer's GL context and the compiled model
-    are most of a trial's setup; a reset gives the state a new simulator would)."""
+    are most of a trial's setup; a reset gives the state a new simulator would); ``push``:
+    someone moves an object while the robot works (a disturbance, for benchmarks);
+    ``look_period``: how often an arm looks again at what it acts on (0: never)."""
     wall0 = time.perf_counter()
     own = sim is None
     if sim is None:
@@ -286,7 +296,12 @@ def episode(
         if output is not None:
             log = ReplayLog(Path(output), scene, sim, tree, seed, layout, force)
 
+        pushed: list[float] = []
+
         def on_step(cmd: PoiCommand) -> None:
+            if push is not None and not pushed and sim.t >= push.at:
+                sim.push_object(push.object, push.dx, push.dy)  # the world, not control
+                pushed.append(sim.t)
             # Evaluation's watch, beside control: what a mobile base touches (sim truth),
             # and a handle that leaves the closed hand (slips).
             if scene.robot.base is not None:
@@ -303,6 +318,7 @@ def episode(
             sensors,
             on_decision=None if log is None else log.on_decision,
             speed=speed,
+            look_period=look_period,
         )
         t0 = sim.t
         outcome, reason, decisions, actions, path = executor.run()
@@ -312,7 +328,9 @@ def episode(
                 log.close()
                 log = None
             taught = run_teaching(sim, tree, executor.policy.nodes[0], teach, seed)
-            executor = TreeExecutor(load_tree(teach.tree_path), sensors, speed=speed)
+            executor = TreeExecutor(
+                load_tree(teach.tree_path), sensors, speed=speed, look_period=look_period
+            )
             outcome, reason, more_d, more_a, more_p = executor.run(start=taught.end)
             decisions, actions, path = decisions + more_d, actions + more_a, path + more_p
         # The task ends with its last action: the retreat after a last release

@@ -54,7 +54,7 @@ from smccli.execute.policy import (
 from smccli.execute.sensing import Sensors
 from smccli.learn.dmp import Dmp, rollout
 from smccli.learn.tree import ROOT, Edge, Tree
-from smccli.perception import Cluster, scale_reading
+from smccli.perception import Cluster, clusters_from_frame, scale_reading
 from smccli.perception.scan import align_scans
 from smccli.world.controller import reachable
 from smccli.world.geometry import between, compose, se2, se2_pose
@@ -108,6 +108,12 @@ RELOCALIZE_MIN_FITNESS = 0.3
 within ``inlier_distance`` of the stored scan (the robot still sees the stored place)."""
 RELOCALIZE_MAX_STEP = (0.3, 0.2)
 """Largest correction one alignment may make [m, rad]; a larger one is a wrong match."""
+LOOK_PERIOD = 0.5
+"""While an arm acts on an object, it looks at it again this often [s] (issue 27): one more
+camera frame and clustering each time (20-30 ms of CPU); 0 = off."""
+LOOK_NEAR = 0.06
+"""It stops looking once the hand is this close to where it acts [m]: the fingers hide the
+object and the view would pull the goal onto what is left of it."""
 MAX_POI_SPEED = 0.5
 """Fastest POI speed a rollout may ask for at ``--speed`` above 1 [m/s]. The robot files
 give no velocity limits; the arm's controller caps joint targets at 2.5 rad/s, and on
@@ -115,6 +121,23 @@ min-jerk moves of 25-32 cm the POI lags its target by 0.6-0.9 cm at a 0.5-0.6 m/
 1.0-1.5 cm at 0.8-1.0 m/s and 3-9 cm beyond 1.2 m/s (docs/choices.md, "Idle time and
 replay speed"): half the speed where tracking breaks down. A base's force caps saturate
 it at 1 m/s, and its servos lag 9 cm at 0.4 m/s: the same 0.5 m/s is its bound too."""
+
+
+def steer(path: np.ndarray, new: np.ndarray, i: int) -> np.ndarray:
+    """``path`` (n, d) already streamed up to index ``i - 1``, bent onto ``new`` (n, d), the
+    same DMP rolled out to a moved goal: from ``i`` on ``new`` plus the gap at ``i - 1``,
+    faded out with a min-jerk blend so the path stays smooth and ends on the new goal (the
+    moving-target DMP's convergence to a moved goal, docs/dmp.md)."""
+    out = path.copy()
+    n = len(path)
+    if i >= n:
+        return out
+    gap = path[i - 1] - new[i - 1]
+    s = (np.arange(i, n) - (i - 1)) / (n - i)
+    fade = 1.0 - s**3 * (10 - 15 * s + 6 * s**2)
+    out[i:] = new[i:] + fade[:, None] * gap
+    return out
+
 
 # --- speed --------------------------------------------------------------------------------
 
@@ -218,7 +241,8 @@ class TreeExecutor:
     <smccli.execute.policy.TreePolicy.decide>`), stream the plan (:meth:`execute`) and
     advance the policy. ``on_decision`` (the replay log) observes each decision;
     ``max_time`` bounds the sim time before a ``timeout`` stop [s]; ``speed`` plays every
-    DMP that many times faster (:func:`at_speed`; :func:`check_speed` bounds it).
+    DMP that many times faster (:func:`at_speed`; :func:`check_speed` bounds it);
+    ``look_period``: how often an arm looks again at what it acts on (:meth:`execute`).
     """
 
     def __init__(
@@ -228,8 +252,11 @@ class TreeExecutor:
         on_decision: Callable[[Decision, CameraFrame, np.ndarray], None] | None = None,
         max_time: float = 120.0,
         speed: float = 1.0,
+        look_period: float = LOOK_PERIOD,
     ) -> None:
         tree = at_speed(tree, speed)
+        self.look_period = look_period
+        """How often an arm looks again at the object it acts on [s]; 0 = never."""
         self.tree = tree
         self.params = tree.params
         self.sensors = sensors
@@ -370,6 +397,8 @@ class TreeExecutor:
         k = len(path) - 1 if plan.switch_index is None or not midway else plan.switch_index
         if plan.scan_alignment is not None:
             goal = self._stream_relocalized(edge, path, goal, plan.scan_alignment, grip)
+        elif plan.cluster is not None and self.look_period > 0:
+            path, goal = self._stream_looking(plan, path, goal, k, grip)
         else:
             for i in range(1, k + 1):
                 self._send(self._cmd(path[i], grip, i))
@@ -432,6 +461,43 @@ class TreeExecutor:
             goal = compose(correction, goal)
             D = D_new
         return goal
+
+    def _stream_looking(
+        self, plan: Plan, path: np.ndarray, goal: np.ndarray, k: int, grip: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Stream ``path[1:k+1]`` (n, 4) of an arm's action on an object, looking at it
+        again every ``look_period`` until the hand is within :data:`LOOK_NEAR` of where
+        it acts (then the hand hides it): where it moved, or is seen better, the goal moves
+        and the rest of the path with it (:func:`steer`). Returns (path, goal)."""
+        s = self.sensors
+        edge = self.policy.edge(plan.edge or "")
+        seen = plan.cluster
+        assert seen is not None
+        act = path[k].copy()  # where the hand acts on it: the grasp, or the goal
+        next_look = s.t + self.look_period
+        for i in range(1, k + 1):
+            self._send(self._cmd(path[i], grip, i))
+            if s.t < next_look - 1e-9 or i == k:
+                continue
+            next_look = s.t + self.look_period
+            if np.linalg.norm(self._poi_now()[:3] - act[:3]) < LOOK_NEAR:
+                continue
+            frame = s.render_camera()
+            clusters = clusters_from_frame(frame, s.robot_geometry(), self.params.perception)
+            found = self.policy.look_again(plan, seen, clusters)
+            if found is None:
+                continue
+            seen, new_goal = found
+            new = rollout(
+                edge.smc.action.dmp,
+                start=path[0],
+                goal=new_goal,
+                duration=plan.duration,
+                n_steps=len(path),
+            )[1]
+            path = steer(path, new, i)
+            goal, act = new_goal, path[k].copy()
+        return path, goal
 
     def _retreat(self) -> None:
         """Back the hand out of what it released: :data:`RETREAT` up along the approach

@@ -620,6 +620,16 @@ class Sim:
             b = self._id(mujoco.mjtObj.mjOBJ_BODY, name)
         return np.array([*self.data.xpos[b], yaw_of(self.data.xmat[b])])
 
+    def push_object(self, name: str, dx: float, dy: float) -> None:
+        """Move a free object by ``dx``, ``dy`` [m] on the table and stop it: someone pushed
+        it (a disturbance for benchmarks; control learns of it only through the camera)."""
+        if name not in self._free_qadr:
+            raise ValueError(f"push_object: {name!r} is not a free object of the scene")
+        qa, va = self._free_qadr[name]
+        self.data.qpos[qa : qa + 2] += (dx, dy)
+        self.data.qvel[va : va + 6] = 0.0
+        mujoco.mj_forward(self.model, self.data)
+
     def object_speed(self, name: str) -> float:
         """Linear speed of an object's body [m/s]."""
         if name not in self._free_qadr:
@@ -767,6 +777,21 @@ class Sim:
     def shows(self, variant: str) -> bool:
         """Whether the layout shows every object of ``variant``."""
         return set(dict(self.scene.variants)[variant]) <= set(self.present)
+
+
+@dataclass(frozen=True, slots=True)
+class Push:
+    """Someone moves an object while the robot works (:meth:`Sim.push_object`): a
+    disturbance for benchmarks and tests, never seen by control but through the camera."""
+
+    object: str
+    """The free object moved."""
+    at: float
+    """Simulation time of the push [s]."""
+    dx: float
+    """Displacement along world x [m]."""
+    dy: float
+    """Displacement along world y [m]."""
 
 
 def _descends(m: mujoco.MjModel, body: int, root: int) -> bool:
