@@ -661,8 +661,8 @@ class TreePolicy:
         seen and its D_P to the SMC's taught perception is below T_hP (a view the arm hides
         too much of is not). The goal moves when the object has moved by more than
         :data:`LOOK_MOVED`, or when this view matches the taught one better by
-        :data:`LOOK_BETTER` (seen whole where the decision saw it partly hidden); else None. Which SMC runs is not
-        reconsidered: decisions stay as the paper has them.
+        :data:`LOOK_BETTER` (seen whole where the decision saw it partly hidden); else
+        None. Which SMC runs is not reconsidered: decisions stay as the paper has them.
         """
         edge = self.edge(plan.edge) if plan.edge is not None else None
         if edge is None or edge.smc.perception.cluster is None or plan.goal is None:
