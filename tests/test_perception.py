@@ -259,6 +259,17 @@ def test_a_top_partly_hidden_by_the_arm_is_not_taken_for_a_protrusion(scene):
     assert c.yaw_period == np.pi
 
 
+def test_a_box_under_the_arm_is_partly_hidden(scene):
+    params = _SCENE_PARAMS
+    scene.clear()
+    scene.place("white_box", 0.61, 0.18, 0.3)
+    (alone,) = clusters_from_frame(scene.render(), None, params)
+    assert alone.hidden < params.hidden_min_points
+    scene.show_arm()
+    (under,) = clusters_from_frame(scene.render(), scene.robot_geometry(), params)
+    assert under.hidden >= params.hidden_min_points  # the arm in front of part of it
+
+
 def test_d_cluster_tells_the_mug_from_the_cylinder_of_its_body(scene):
     rng = np.random.default_rng(5)
     mugs, cylinders = [], []

@@ -65,6 +65,9 @@ LOOK_MOVED = 0.01
 """It has moved when its centre is this far from where it was last seen [m]; less is the
 noise of one view against another (a box's centre wanders 2-5 mm from frame to frame,
 measured under the realistic sensors)."""
+LOOK_MOVED_HIDDEN = 0.03
+"""A partly hidden view (:attr:`Cluster.hidden`) has moved only this far [m]: its centre
+is off by what the arm hides of it, 1-2 cm on bench_pick's box."""
 LOOK_BETTER = 0.02
 """A view that has not moved replaces the last one when its D_P to the taught perception is
 this much lower: seen whole where it was partly hidden, not the noise of two views of one
@@ -658,30 +661,37 @@ class TreePolicy:
         ``clusters`` of a frame taken while the action runs; with the goal mapped on it.
 
         A cluster is that object when it lies within :data:`LOOK_RADIUS` of where it was
-        seen and its D_P to the SMC's taught perception is below T_hP (a view the arm hides
-        too much of is not). The goal moves when the object has moved by more than
-        :data:`LOOK_MOVED`, or when this view matches the taught one better by
-        :data:`LOOK_BETTER` (seen whole where the decision saw it partly hidden); else
-        None. Which SMC runs is not reconsidered: decisions stay as the paper has them.
+        seen and its D_P to the SMC's taught perception is below T_hP; a whole view comes
+        before one something hides part of (:attr:`Cluster.hidden`). The goal moves when
+        the object has moved by more than :data:`LOOK_MOVED` (a partly hidden view:
+        :data:`LOOK_MOVED_HIDDEN`), or when a whole view is clearer: the last one was
+        partly hidden, or this one matches the taught one better by :data:`LOOK_BETTER`;
+        else None. Which SMC runs is not reconsidered: decisions stay as the paper has them.
         """
         edge = self.edge(plan.edge) if plan.edge is not None else None
         if edge is None or edge.smc.perception.cluster is None or plan.goal is None:
             return None
         taught = edge.smc.perception.cluster
         pp = self.params.perception
-        best: tuple[float, Cluster] | None = None
-        for c in clusters:
-            if np.hypot(*(c.centroid[:2] - seen.centroid[:2])) > LOOK_RADIUS:
-                continue
-            d = d_cluster(c, taught, pp)
-            if d < self.params.t_hp and (best is None or d < best[0]):
-                best = (d, c)
-        if best is None:
+        hid = pp.hidden_min_points
+        found = [
+            (c.hidden >= hid, d, c)
+            for c in clusters
+            if np.hypot(*(c.centroid[:2] - seen.centroid[:2])) <= LOOK_RADIUS
+            and (d := d_cluster(c, taught, pp)) < self.params.t_hp
+        ]
+        if not found:
             return None
-        d, c = best
+        hidden, d, c = min(found, key=lambda f: (f[0], f[1]))  # a whole view first
         moved = float(np.hypot(*(c.centroid[:2] - seen.centroid[:2])))
-        if moved <= LOOK_MOVED and d > d_cluster(seen, taught, pp) - LOOK_BETTER:
-            return None
+        if hidden:
+            # Its centre is off by what is hidden: only a larger move counts.
+            if moved <= LOOK_MOVED_HIDDEN:
+                return None
+        elif moved <= LOOK_MOVED:
+            clearer = seen.hidden >= hid or d < d_cluster(seen, taught, pp) - LOOK_BETTER
+            if not clearer:
+                return None
         start = plan.poses[0]
         goal = self.map_goal(edge.smc.action, c, start, edge.id, taught=taught)
         return c, goal

@@ -53,6 +53,11 @@ class Cluster:
     """Its side faces' brightness over the table's around it, dimensionless
     (:mod:`smccli.perception.brightness`); NaN without a table to compare with, and in
     trees from before it."""
+    hidden: int = 0
+    """Its points whose pixel borders something clearly nearer the camera (the arm, an
+    object in front) or the image's edge: with ``hidden_min_points`` of them, part of it is
+    out of sight, and its centre and extents are those of what is seen. Not stored in
+    trees: a fact about the frame it came from."""
     crop_faces: tuple[str, ...] = ()
     """Faces of the perception's crop box the cluster's points reach (``x_min``, ...,
     ``z_max``, within ``crop_touch``): the box may cut the object there. Not stored in
@@ -347,6 +352,35 @@ def cut_points(
     return cut
 
 
+def occluded_points(
+    points: np.ndarray, labels: np.ndarray, frame: CameraFrame, params: PerceptionParams
+) -> np.ndarray:
+    """Points (n,) whose pixel borders (8-neighbourhood) a pixel of another label whose
+    depth reading is ``silhouette_step`` nearer the camera, or the image's edge: there
+    something in front (the arm, the object it holds, another object) or the frame hides
+    part of the object. Unlike :func:`cut_points`, a neighbour level with it (an object
+    touching it) or without a reading (a hole of a noisy depth camera) does not count."""
+    depth = np.asarray(frame.depth, dtype=np.float64)
+    h, w = depth.shape[:2]
+    u, v, z = _pixels(points, frame)
+    img = np.full((h, w), -2, dtype=np.int64)
+    ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    img[v[ok], u[ok]] = labels[ok]
+    hidden = ~ok
+    for du in (-1, 0, 1):
+        for dv in (-1, 0, 1):
+            if du == 0 and dv == 0:
+                continue
+            uu, vv = u + du, v + dv
+            inside = ok & (uu >= 0) & (uu < w) & (vv >= 0) & (vv < h)
+            hidden |= ok & ~inside
+            i = np.flatnonzero(inside)
+            d = depth[vv[i], uu[i]]
+            nearer = np.isfinite(d) & (d > 0) & (d < z[i] - params.silhouette_step)
+            hidden[i] |= (img[vv[i], uu[i]] != labels[i]) & nearer
+    return hidden
+
+
 def clusters_from_frame(
     frame: CameraFrame,
     robot: RobotGeometry | None,
@@ -367,6 +401,7 @@ def clusters_from_frame(
     )
     labels = attach_hidden_parts(points, cluster_labels(points, params), frame, params)
     cut = cut_points(points, labels, frame, params)
+    occluded = occluded_points(points, labels, frame, params)
     found = []
     for k in range(int(labels.max(initial=-1)) + 1):
         idx = np.flatnonzero(labels == k)
@@ -385,6 +420,7 @@ def clusters_from_frame(
                 points[idx], colors[idx], side, table_points, table_colors, params
             )
             cluster = replace(cluster, brightness=brightness)
+        cluster = replace(cluster, hidden=int(occluded[idx].sum()))
         faces = crop_faces(
             in_crop_frame(points[idx], params, base),
             np.asarray(params.crop_min),
@@ -408,8 +444,9 @@ def _is_number(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
-_STORED = tuple(f for f in fields(Cluster) if f.name != "crop_faces")
-"""The fields a tree keeps: ``crop_faces`` is a warning about the frame it came from."""
+_STORED = tuple(f for f in fields(Cluster) if f.name not in ("crop_faces", "hidden"))
+"""The fields a tree keeps: ``crop_faces`` and ``hidden`` are facts about the frame it came
+from."""
 _OPTIONAL = {"brightness": math.nan}
 """Stored fields a tree may lack (from before them), with the value they then take; a NaN
 is left out of the file (JSON has no NaN)."""

@@ -127,6 +127,9 @@ class PerceptionParams:
     least this much farther from the camera [m]: there an occluder, the self-filter or the
     crop hides part of the object. A protrusion is looked for only when no pixel of the
     top layer is cut (a top partly hidden by the arm makes its sides stick out of it)."""
+    hidden_min_points: int = field(default=10, metadata={"omit_default": True})
+    """A cluster with this many points bordering something in front of it is partly
+    hidden (:attr:`Cluster.hidden`): looking again, its centre is not the object's."""
     attach_gap: float = 0.035
     """A cluster hidden in part behind a taller one, touching it in the image and within
     this of it across the touching pixels, is a part of it [m]: a mug's handle behind its
