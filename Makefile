@@ -80,6 +80,7 @@ bench: setup
 	$(PY) -m smccli.bench.rooms
 	$(PY) -m smccli.bench.cluster
 	$(PY) -m smccli.bench.learning
+	$(PY) -m smccli.bench.look
 
 lint: setup
 	$(VENV)/bin/ruff check smccli tests
