@@ -49,7 +49,8 @@ def pushed_campaign(
     rng = np.random.default_rng(seed)
     lo, hi = WINDOWS[window]
     sim = Sim(scene, layout_for(scene, seed, 0))
-    ok, failures = 0, {}
+    ok = 0
+    failures: dict[str, int] = {}
     t0 = time.perf_counter()
     try:
         for t in range(trials):
