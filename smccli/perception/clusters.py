@@ -331,6 +331,23 @@ def cut_points(
     object itself; anything else nearer or level with it (an occluder, pixels removed by
     the self-filter or the crop) hides part of it.
     """
+    return outline_points(points, labels, frame, params)[0]
+
+
+def outline_points(
+    points: np.ndarray, labels: np.ndarray, frame: CameraFrame, params: PerceptionParams
+) -> tuple[np.ndarray, np.ndarray]:
+    """Two masks (n,) of the points on their cluster's outline in the image, in one pass
+    over the 8-neighbourhood of each point's pixel:
+
+    - *cut* (:func:`cut_points`): a neighbour outside the cluster that is not
+      ``silhouette_step`` farther from the camera, or the image's edge;
+    - *occluded*: a neighbour of another label whose depth reading is ``silhouette_step``
+      nearer, or the image's edge: something in front (the arm, another object) or the
+      frame hides part of the object (:attr:`Cluster.hidden`). A neighbour level with it
+      (an object touching it) or without a reading (a hole of a noisy depth camera) is not
+      in front of it.
+    """
     depth = np.asarray(frame.depth, dtype=np.float64)
     h, w = depth.shape[:2]
     u, v, z = _pixels(points, frame)
@@ -338,6 +355,7 @@ def cut_points(
     ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
     img[v[ok], u[ok]] = labels[ok]
     cut = ~ok
+    occluded = ~ok
     for du in (-1, 0, 1):
         for dv in (-1, 0, 1):
             if du == 0 and dv == 0:
@@ -345,40 +363,15 @@ def cut_points(
             uu, vv = u + du, v + dv
             inside = ok & (uu >= 0) & (uu < w) & (vv >= 0) & (vv < h)
             cut |= ok & ~inside  # at the image's edge
+            occluded |= ok & ~inside
             i = np.flatnonzero(inside)
             d = depth[vv[i], uu[i]]
+            other = img[vv[i], uu[i]] != labels[i]
             behind = np.isfinite(d) & (d > z[i] + params.silhouette_step)
-            cut[i] |= (img[vv[i], uu[i]] != labels[i]) & ~behind
-    return cut
-
-
-def occluded_points(
-    points: np.ndarray, labels: np.ndarray, frame: CameraFrame, params: PerceptionParams
-) -> np.ndarray:
-    """Points (n,) whose pixel borders (8-neighbourhood) a pixel of another label whose
-    depth reading is ``silhouette_step`` nearer the camera, or the image's edge: there
-    something in front (the arm, the object it holds, another object) or the frame hides
-    part of the object. Unlike :func:`cut_points`, a neighbour level with it (an object
-    touching it) or without a reading (a hole of a noisy depth camera) does not count."""
-    depth = np.asarray(frame.depth, dtype=np.float64)
-    h, w = depth.shape[:2]
-    u, v, z = _pixels(points, frame)
-    img = np.full((h, w), -2, dtype=np.int64)
-    ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
-    img[v[ok], u[ok]] = labels[ok]
-    hidden = ~ok
-    for du in (-1, 0, 1):
-        for dv in (-1, 0, 1):
-            if du == 0 and dv == 0:
-                continue
-            uu, vv = u + du, v + dv
-            inside = ok & (uu >= 0) & (uu < w) & (vv >= 0) & (vv < h)
-            hidden |= ok & ~inside
-            i = np.flatnonzero(inside)
-            d = depth[vv[i], uu[i]]
+            cut[i] |= other & ~behind
             nearer = np.isfinite(d) & (d > 0) & (d < z[i] - params.silhouette_step)
-            hidden[i] |= (img[vv[i], uu[i]] != labels[i]) & nearer
-    return hidden
+            occluded[i] |= other & nearer
+    return cut, occluded
 
 
 def clusters_from_frame(
@@ -400,8 +393,7 @@ def clusters_from_frame(
         frame, robot, params, base
     )
     labels = attach_hidden_parts(points, cluster_labels(points, params), frame, params)
-    cut = cut_points(points, labels, frame, params)
-    occluded = occluded_points(points, labels, frame, params)
+    cut, occluded = outline_points(points, labels, frame, params)
     found = []
     for k in range(int(labels.max(initial=-1)) + 1):
         idx = np.flatnonzero(labels == k)
