@@ -38,7 +38,7 @@ from smccli.learn.params import SmcParams
 from smccli.learn.smc import Action
 from smccli.learn.tree import ROOT, Edge, Tree
 from smccli.perception import Cluster, clusters_from_frame, d_cluster
-from smccli.perception.distance import MIN_EXTENT
+from smccli.perception.distance import MIN_EXTENT, d_extents
 from smccli.perception.histogram import BC_MIN
 from smccli.perception.room import d_room, room_histogram
 from smccli.perception.scan import Scan2D, align_scans, chamfer
@@ -68,6 +68,9 @@ measured under the realistic sensors)."""
 LOOK_MOVED_HIDDEN = 0.03
 """A partly hidden view (:attr:`Cluster.hidden`) has moved only this far [m]: its centre
 is off by what the arm hides of it, 1-2 cm on bench_pick's box."""
+LOOK_SAME_SIZE = 0.1
+"""A partly hidden view counts only with its extents within this log-ratio (10 %) of the
+last view's: a Panda's arm over a third of the box once moved its centre 5 cm (bench)."""
 LOOK_BETTER = 0.02
 """A view that has not moved replaces the last one when its D_P to the taught perception is
 this much lower: seen whole where it was partly hidden, not the noise of two views of one
@@ -664,9 +667,10 @@ class TreePolicy:
         seen and its D_P to the SMC's taught perception is below T_hP; a whole view comes
         before one something hides part of (:attr:`Cluster.hidden`). The goal moves when
         the object has moved by more than :data:`LOOK_MOVED` (a partly hidden view:
-        :data:`LOOK_MOVED_HIDDEN`), or when a whole view is clearer: the last one was
-        partly hidden, or this one matches the taught one better by :data:`LOOK_BETTER`;
-        else None. Which SMC runs is not reconsidered: decisions stay as the paper has them.
+        :data:`LOOK_MOVED_HIDDEN`, its size within :data:`LOOK_SAME_SIZE`), or when a
+        whole view is clearer: the last one was partly hidden, or this one matches the
+        taught one better by :data:`LOOK_BETTER`; else None. Which SMC runs is not
+        reconsidered: decisions stay as the paper has them.
         """
         edge = self.edge(plan.edge) if plan.edge is not None else None
         if edge is None or edge.smc.perception.cluster is None or plan.goal is None:
@@ -685,8 +689,10 @@ class TreePolicy:
         hidden, d, c = min(found, key=lambda f: (f[0], f[1]))  # a whole view first
         moved = float(np.hypot(*(c.centroid[:2] - seen.centroid[:2])))
         if hidden:
-            # Its centre is off by what is hidden: only a larger move counts.
-            if moved <= LOOK_MOVED_HIDDEN:
+            # Its centre is off by what is hidden: only a larger move counts, and only with
+            # the whole object in view (the arm in front of its edge, not of a third of it).
+            same_size = d_extents(c.extents, seen.extents) <= LOOK_SAME_SIZE
+            if moved <= LOOK_MOVED_HIDDEN or not same_size:
                 return None
         elif moved <= LOOK_MOVED:
             clearer = seen.hidden >= hid or d < d_cluster(seen, taught, pp) - LOOK_BETTER
