@@ -53,7 +53,7 @@ from smccli.execute.policy import (
     match_edges,
 )
 from smccli.execute.sensing import Sensors
-from smccli.learn.dmp import Dmp, rollout
+from smccli.learn.dmp import Dmp, min_jerk, rollout
 from smccli.learn.tree import ROOT, Edge, Tree
 from smccli.perception import Cluster, PerceptionParams, clusters_from_frame, scale_reading
 from smccli.perception.scan import align_scans
@@ -154,7 +154,7 @@ def steer(path: np.ndarray, new: np.ndarray, i: int) -> np.ndarray:
         return out
     gap = path[i - 1] - new[i - 1]
     s = (np.arange(i, n) - (i - 1)) / (n - i)
-    fade = 1.0 - s**3 * (10 - 15 * s + 6 * s**2)
+    fade = 1.0 - min_jerk(s)
     out[i:] = new[i:] + fade[:, None] * gap
     return out
 

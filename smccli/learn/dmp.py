@@ -37,7 +37,17 @@ from threadpoolctl import threadpool_limits
 
 from smccli.errors import LogError, TreeError
 
-__all__ = ["Dmp", "DmpParams", "fit", "from_dict", "merge", "rollout", "shape_distance", "to_dict"]
+__all__ = [
+    "Dmp",
+    "DmpParams",
+    "fit",
+    "from_dict",
+    "merge",
+    "min_jerk",
+    "rollout",
+    "shape_distance",
+    "to_dict",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,7 +139,7 @@ def _from_canonical(c: np.ndarray, start: np.ndarray, fr: _Frame, n_pos: int) ->
     return y + start
 
 
-def _min_jerk(s: np.ndarray) -> np.ndarray:
+def min_jerk(s: np.ndarray) -> np.ndarray:
     """Min-jerk profile 10s^3 - 15s^4 + 6s^5 from 0 to 1, rest to rest, shape (N,)."""
     return s**3 * (10 - 15 * s + 6 * s**2)
 
@@ -200,7 +210,7 @@ def fit(
     # linear in the weights, e = G w with G the responses to each basis function from rest.
     # Unlike regressing the forcing target e'' + K e + D e', this needs no second
     # derivative of a noisy demonstration and matches the rollout's start from rest.
-    e = c - np.outer(_min_jerk(s), c[-1])
+    e = c - np.outer(min_jerk(s), c[-1])
     g = _integrate(np.eye(params.n_basis), params, s)
     # One BLAS thread: OpenBLAS splits a product and a solve by its thread count, which
     # changes the weights' last bits (measured: from the 8th digit), so a tree would depend
@@ -244,7 +254,7 @@ def rollout(
     fr = _frame(start, goal, dmp.n_pos, p, fallback_heading=fr_demo.heading)
     goal_c = _to_canonical(goal[None], start, fr, dmp.n_pos)[0]
     s = np.linspace(0.0, 1.0, n_steps)
-    mj = _min_jerk(s)
+    mj = min_jerk(s)
     e = _integrate(dmp.weights, p, s)
     e -= np.outer(mj, e[-1])  # goal-converging correction of the fit residual e(1)
     y = _from_canonical(np.outer(mj, goal_c) + e, start, fr, dmp.n_pos)

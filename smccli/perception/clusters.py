@@ -405,14 +405,14 @@ def clusters_from_frame(
         else:
             plane = planes[0] if planes else None
         cluster = describe_cluster(points[idx], colors[idx], plane, params, cut[idx])
+        brightness = cluster.brightness
         if params.brightness_scale > 0:
             heights = heights_above(points[idx], plane)
             side = heights <= heights.max() - params.top_band  # below the top layer
             brightness = relative_brightness(
                 points[idx], colors[idx], side, table_points, table_colors, params
             )
-            cluster = replace(cluster, brightness=brightness)
-        cluster = replace(cluster, hidden=int(occluded[idx].sum()))
+        cluster = replace(cluster, brightness=brightness, hidden=int(occluded[idx].sum()))
         faces = crop_faces(
             in_crop_frame(points[idx], params, base),
             np.asarray(params.crop_min),
