@@ -37,7 +37,7 @@ from smccli.learn.dmp import rollout
 from smccli.learn.params import SmcParams
 from smccli.learn.smc import Action
 from smccli.learn.tree import ROOT, Edge, Tree
-from smccli.perception import Cluster, clusters_from_frame, d_cluster
+from smccli.perception import Cluster, cluster_unions, clusters_from_frame, d_cluster
 from smccli.perception.distance import MIN_EXTENT, d_extents
 from smccli.perception.histogram import BC_MIN
 from smccli.perception.room import d_room, room_histogram
@@ -195,7 +195,9 @@ class Candidate:
     contingent: bool
     """C_Now: d_p < T_hP (eq. 36)."""
     cluster_index: int | None
-    """Context cluster matched to the SMC's localized perception (eq. 39), if any."""
+    """Context cluster matched to the SMC's localized perception (eq. 39), if any; from
+    :attr:`Decision.n_clusters` on, a union of two neighbouring clusters
+    (:func:`~smccli.perception.cluster_unions`)."""
     terms: tuple[tuple[str, float], ...] = ()
     """A mobile base's D_P by sensor (``room``, ``scan``), and the ICP fitness of the scan's
     alignment (``icp_fitness``, not part of D_P)."""
@@ -636,8 +638,26 @@ class TreePolicy:
         t0 = time.perf_counter()
         d, idx = match_edges(stack, clusters, obs.weight, self.params)
         ok = d < self.params.t_hp
+        n_seen, union_s = len(clusters), 0.0
+        if not ok.any() and obs.camera is not None and n_seen >= 2 and stack.has_cluster:
+            # Nothing contingent: the object may be in pieces (an open box's near wall and
+            # its floor, apart across a band of depth holes). Its taught perception says
+            # whether two neighbouring clusters together are it; only here, so a decision
+            # a whole object makes is never changed.
+            t1 = time.perf_counter()
+            unions = cluster_unions(
+                obs.camera, obs.robot_geometry, self.params.perception, obs.base
+            )
+            union_s = time.perf_counter() - t1
+            if unions:
+                d2, idx2 = match_edges(stack, unions, obs.weight, self.params)
+                better = d2 < d
+                d, idx = np.where(better, d2, d), np.where(better, idx2 + n_seen, idx)
+                clusters = clusters + unions
+                ok = d < self.params.t_hp
         chosen = int(np.argmin(np.where(ok, d, np.inf))) if ok.any() else None
-        match_s = time.perf_counter() - t0
+        match_s = time.perf_counter() - t0 - union_s
+        perceive_s += union_s
         cands = tuple(
             Candidate(e.id, e.parent, float(d[i]), bool(ok[i]), None if idx[i] < 0 else int(idx[i]))
             for i, e in enumerate(stack.edges)
@@ -650,7 +670,7 @@ class TreePolicy:
             candidates=cands,
             chosen=None if edge is None else edge.id,
             mapped_goal=None,
-            n_clusters=len(clusters),
+            n_clusters=n_seen,
             weight=obs.weight,
             perceive_s=perceive_s,
             match_s=match_s,

@@ -1,9 +1,10 @@
 """Perception saliency for the depth camera (section 3.3): object clusters and their distances.
 
 Pipeline (:func:`clusters_from_frame`): depth -> world points -> workspace crop ->
-self-filter -> table plane removal (RANSAC) -> DBSCAN -> per cluster a colour histogram,
-an upright oriented box (centroid, yaw, extents). :func:`d_cluster` compares two clusters
-(1 = clearly different, T_hP = 0.1 separates same from different);
+self-filter -> table plane removal (RANSAC) -> DBSCAN -> parts joined -> per cluster a
+colour histogram, an upright oriented box (centroid, yaw, extents); :func:`cluster_unions`
+describes neighbouring clusters as one (an object seen in pieces). :func:`d_cluster`
+compares two clusters (1 = clearly different, T_hP = 0.1 separates same from different);
 :func:`salient_cluster` picks the cluster at the POI (eq. 20-22).
 
 The mobile half (paper 4.2): a 2-D lidar scan (SL, :mod:`~smccli.perception.scan`) with
@@ -18,6 +19,7 @@ from smccli.perception.clusters import (
     Cluster,
     cluster_from_dict,
     cluster_to_dict,
+    cluster_unions,
     clusters_from_frame,
 )
 from smccli.perception.distance import d_cluster, d_extents, d_scalar
@@ -54,6 +56,7 @@ __all__ = [
     "cloud_from_frame",
     "cluster_from_dict",
     "cluster_to_dict",
+    "cluster_unions",
     "clusters_from_frame",
     "d_cluster",
     "d_extents",

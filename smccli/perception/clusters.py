@@ -9,6 +9,7 @@ from typing import Any
 import cv2
 import numpy as np
 import open3d as o3d
+from scipy.spatial import cKDTree
 
 from smccli.perception.brightness import relative_brightness
 from smccli.perception.cloud import (
@@ -321,6 +322,91 @@ def attach_hidden_parts(
     return out
 
 
+def _footprint_mask(
+    xy: np.ndarray, origin: np.ndarray, shape: tuple[int, int], grow: int
+) -> np.ndarray:
+    """The convex hull of points ``xy`` (n, 2) [m] rasterised at :data:`JOIN_CELL` on a
+    grid of ``shape`` whose cell (0, 0) is at ``origin``, dilated by ``grow`` cells."""
+    mask = np.zeros(shape, dtype=np.uint8)
+    cells = np.rint((xy - origin) / JOIN_CELL).astype(np.int32)
+    cv2.fillConvexPoly(mask, cv2.convexHull(cells), 1)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))
+    return cv2.dilate(mask, kernel).astype(bool)
+
+
+JOIN_CELL = 0.002
+"""Grid cell of the footprint overlap in :func:`join_split_parts` [m]: a fifth of the
+thinnest wall of the built-in objects."""
+
+
+def join_split_parts(
+    points: np.ndarray,
+    labels: np.ndarray,
+    planes: list[np.ndarray],
+    params: PerceptionParams,
+) -> np.ndarray:
+    """Labels (n,) with the parts of one object that depth holes split apart merged.
+
+    A noisy depth camera loses the pixels along depth edges; an open box's 1 cm walls are
+    nothing but edges, so its floor (seen past the near rim) and its near walls fall apart
+    into clusters DBSCAN cannot join. Two objects standing on one surface never share floor
+    space, so clusters standing on the same support plane (each reaching down to within
+    ``join_base`` of it) whose footprints, grown by ``join_margin``, overlap by
+    ``join_overlap`` of the smaller one's are one object. An object held above another
+    does not reach down to the surface and stays apart.
+    """
+    n_labels = int(labels.max(initial=-1)) + 1
+    if n_labels < 2:
+        return labels
+    standing: list[tuple[int, np.ndarray, int]] = []  # (label, xy, support plane index)
+    for k in range(n_labels):
+        idx = np.flatnonzero(labels == k)
+        if len(idx) < 3:
+            continue
+        pts = points[idx]
+        if params.remove_walls:
+            plane = support_plane(pts, planes)
+            which = next((i for i, p in enumerate(planes) if p is plane), -1)
+        else:
+            plane = planes[0] if planes else None
+            which = 0
+        if plane is None or float(heights_above(pts, plane).min()) > params.join_base:
+            continue
+        standing.append((k, pts[:, :2].astype(np.float64), which))
+    parent = np.arange(n_labels)
+
+    def root(a: int) -> int:
+        while parent[a] != a:
+            a = int(parent[a])
+        return a
+
+    grow = max(int(round(params.join_margin / JOIN_CELL)), 0)
+    for i, (a, xa, pa) in enumerate(standing):
+        for b, xb, pb in standing[i + 1 :]:
+            if pa != pb or root(a) == root(b):
+                continue
+            reach = 2 * params.join_margin
+            if np.any(
+                np.maximum(xa.min(axis=0), xb.min(axis=0)) - reach
+                > np.minimum(xa.max(axis=0), xb.max(axis=0))
+            ):
+                continue  # bounding boxes too far apart to overlap
+            lo = np.minimum(xa.min(axis=0), xb.min(axis=0)) - reach
+            cols, rows = (
+                np.ceil((np.maximum(xa.max(axis=0), xb.max(axis=0)) + reach - lo) / JOIN_CELL) + 1
+            ).astype(int)
+            shape = (int(rows), int(cols))
+            ma = _footprint_mask(xa, lo, shape, grow)
+            mb = _footprint_mask(xb, lo, shape, grow)
+            shared = np.count_nonzero(ma & mb)
+            if shared >= params.join_overlap * min(ma.sum(), mb.sum()):
+                parent[root(b)] = root(a)
+    roots = np.array([root(k) for k in range(n_labels)])
+    out = labels.copy()
+    out[labels >= 0] = roots[labels[labels >= 0]]
+    return out
+
+
 def cut_points(
     points: np.ndarray, labels: np.ndarray, frame: CameraFrame, params: PerceptionParams
 ) -> np.ndarray:
@@ -374,6 +460,78 @@ def outline_points(
     return cut, occluded
 
 
+@dataclass(frozen=True, slots=True)
+class Segmentation:
+    """One frame's object points and their clusters: what the clusters are described from."""
+
+    points: np.ndarray
+    """Object points standing on the table, shape (n, 3) [m], world frame."""
+    colors: np.ndarray
+    """Their colours, shape (n, 3) uint8 RGB."""
+    planes: list[np.ndarray]
+    """Support planes ``[a, b, c, d]`` found (the table first)."""
+    table: tuple[np.ndarray, np.ndarray]
+    """The table's points (m, 3) [m] and colours (m, 3) uint8 (relative brightness)."""
+    labels: np.ndarray
+    """Cluster of each point, shape (n,) int; -1 = noise."""
+    cut: np.ndarray
+    """Points (n,) bordering something that hides part of their object (:func:`cut_points`)."""
+    occluded: np.ndarray
+    """Points (n,) bordering something in front of them (:func:`outline_points`)."""
+
+
+def segment_frame(
+    frame: CameraFrame,
+    robot: RobotGeometry | None,
+    params: PerceptionParams,
+    base: np.ndarray | None = None,
+) -> Segmentation:
+    """depth -> world points -> crop -> self-filter (``robot``'s spheres) -> table plane
+    removal (RANSAC) -> DBSCAN -> hidden parts joined to the cluster hiding them -> parts
+    split by depth holes joined (:func:`join_split_parts`) -> outlines."""
+    points, colors, planes, table = object_points_on_planes(frame, robot, params, base)
+    labels = attach_hidden_parts(points, cluster_labels(points, params), frame, params)
+    labels = join_split_parts(points, labels, planes, params)
+    cut, occluded = outline_points(points, labels, frame, params)
+    return Segmentation(points, colors, planes, table, labels, cut, occluded)
+
+
+def _support(seg: Segmentation, idx: np.ndarray, params: PerceptionParams) -> np.ndarray | None:
+    """The plane points ``idx`` stand on: on a tabletop its one table; among shelves and
+    cabinet tops, the one just below."""
+    if params.remove_walls:
+        return support_plane(seg.points[idx], seg.planes)
+    return seg.planes[0] if seg.planes else None
+
+
+def describe_points(
+    seg: Segmentation, idx: np.ndarray, params: PerceptionParams, base: np.ndarray | None
+) -> Cluster:
+    """The cluster of points ``idx`` (k,) of ``seg``: :func:`describe_cluster` with its
+    brightness, the points hidden by something in front and the crop box's faces it
+    reaches."""
+    points, colors = seg.points[idx], seg.colors[idx]
+    plane = _support(seg, idx, params)
+    cluster = describe_cluster(points, colors, plane, params, seg.cut[idx])
+    brightness = cluster.brightness
+    if params.brightness_scale > 0:
+        heights = heights_above(points, plane)
+        side = heights <= heights.max() - params.top_band  # below the top layer
+        brightness = relative_brightness(points, colors, side, *seg.table, params)
+    cluster = replace(cluster, brightness=brightness, hidden=int(seg.occluded[idx].sum()))
+    faces = crop_faces(
+        in_crop_frame(points, params, base),
+        np.asarray(params.crop_min),
+        np.asarray(params.crop_max),
+        params.crop_touch,
+    )
+    return replace(cluster, crop_faces=tuple(faces)) if faces else cluster
+
+
+def _sorted(clusters: list[Cluster]) -> tuple[Cluster, ...]:
+    return tuple(sorted(clusters, key=lambda c: (float(c.centroid[0]), float(c.centroid[1]))))
+
+
 def clusters_from_frame(
     frame: CameraFrame,
     robot: RobotGeometry | None,
@@ -382,46 +540,57 @@ def clusters_from_frame(
 ) -> tuple[Cluster, ...]:
     """The object clusters in one RGB-D frame (ML perception, eq. 14).
 
-    depth -> world points -> crop -> self-filter (``robot``'s spheres) -> table plane
-    removal (RANSAC) -> DBSCAN -> hidden parts joined to the cluster hiding them -> per
-    cluster: histogram, box centre, yaw, symmetry, extents.
-    Sorted by centroid x, then y. Uses only the images and the robot's own geometry (and a
-    mobile manipulator's ``base`` pose from odometry, where its crop box is).
+    :func:`segment_frame`, then per cluster (:func:`describe_points`): histogram, box
+    centre, yaw, symmetry, extents. Sorted by centroid x, then y. Uses only the images and
+    the robot's own geometry (and a mobile manipulator's ``base`` pose from odometry, where
+    its crop box is).
     """
     params = params or PerceptionParams()
-    points, colors, planes, (table_points, table_colors) = object_points_on_planes(
-        frame, robot, params, base
-    )
-    labels = attach_hidden_parts(points, cluster_labels(points, params), frame, params)
-    cut, occluded = outline_points(points, labels, frame, params)
+    seg = segment_frame(frame, robot, params, base)
     found = []
-    for k in range(int(labels.max(initial=-1)) + 1):
-        idx = np.flatnonzero(labels == k)
+    for k in range(int(seg.labels.max(initial=-1)) + 1):
+        idx = np.flatnonzero(seg.labels == k)
+        if len(idx) >= params.min_cluster_points:
+            found.append(describe_points(seg, idx, params, base))
+    return _sorted(found)
+
+
+def cluster_unions(
+    frame: CameraFrame,
+    robot: RobotGeometry | None,
+    params: PerceptionParams,
+    base: np.ndarray | None = None,
+) -> tuple[Cluster, ...]:
+    """Each pair of neighbouring clusters of one frame described as one object: what an
+    object seen in pieces would look like.
+
+    Where a thin wall in front hides the stretch between two parts of an object (an open
+    box's near wall and its floor, seen past the rim across a band of depth holes), no
+    geometry tells the parts from two objects one behind the other; the SMC's taught
+    perception can (:meth:`~smccli.execute.policy.TreePolicy.match` tries these only where
+    no single cluster is contingent). Neighbours stand on the same surface (within
+    ``join_base``) with footprints at most ``piece_gap`` apart. Sorted like
+    :func:`clusters_from_frame`.
+    """
+    seg = segment_frame(frame, robot, params, base)
+    parts = []
+    for k in range(int(seg.labels.max(initial=-1)) + 1):
+        idx = np.flatnonzero(seg.labels == k)
         if len(idx) < params.min_cluster_points:
             continue
-        # A tabletop has one table; among shelves and cabinet tops, the one just below.
-        if params.remove_walls:
-            plane = support_plane(points[idx], planes)
-        else:
-            plane = planes[0] if planes else None
-        cluster = describe_cluster(points[idx], colors[idx], plane, params, cut[idx])
-        brightness = cluster.brightness
-        if params.brightness_scale > 0:
-            heights = heights_above(points[idx], plane)
-            side = heights <= heights.max() - params.top_band  # below the top layer
-            brightness = relative_brightness(
-                points[idx], colors[idx], side, table_points, table_colors, params
-            )
-        cluster = replace(cluster, brightness=brightness, hidden=int(occluded[idx].sum()))
-        faces = crop_faces(
-            in_crop_frame(points[idx], params, base),
-            np.asarray(params.crop_min),
-            np.asarray(params.crop_max),
-            params.crop_touch,
-        )
-        found.append(replace(cluster, crop_faces=tuple(faces)) if faces else cluster)
-    found.sort(key=lambda c: (float(c.centroid[0]), float(c.centroid[1])))
-    return tuple(found)
+        plane = _support(seg, idx, params)
+        if plane is None or float(heights_above(seg.points[idx], plane).min()) > params.join_base:
+            continue
+        parts.append((idx, plane, cKDTree(seg.points[idx, :2])))
+    found = []
+    for i, (ia, pa, ta) in enumerate(parts):
+        for ib, pb, tb in parts[i + 1 :]:
+            if pa is not pb:
+                continue
+            gap = ta.sparse_distance_matrix(tb, params.piece_gap, output_type="ndarray")
+            if len(gap):
+                found.append(describe_points(seg, np.concatenate([ia, ib]), params, base))
+    return _sorted(found)
 
 
 def _json(value: Any) -> Any:

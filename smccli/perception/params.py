@@ -141,6 +141,26 @@ class PerceptionParams:
     """A hidden part has at most this many times the points of the cluster hiding it: a
     mug's cut-off handle has at most 0.23 times its body's (measured over 300 poses), while
     a cylinder under a held cube, bigger than the cube, stays an object of its own."""
+    join_overlap: float = field(default=0.25, metadata={"omit_default": True})
+    """Two clusters standing on the same surface whose footprints (convex hulls in x-y,
+    each grown by ``join_margin``) share this much of the smaller one's area are parts of
+    one object (:func:`~smccli.perception.clusters.join_split_parts`): two objects cannot
+    stand on the same floor space, but a noisy camera's holes along an open box's 1 cm
+    walls cut the box into its floor and its near walls (measured on 40-layout start
+    frames of six scenes: 0.46-1.0 between such parts, 0.21-0.45 between a pyramid and its
+    cut-off apex, which stays apart as before; 0 between two objects, over 1,400 pairs;
+    objects nearer than 1.2 cm are one cluster already, DBSCAN's)."""
+    join_margin: float = field(default=0.0075, metadata={"omit_default": True})
+    """How far each footprint grows before the overlap is measured [m]: half of
+    ``dbscan_eps``, so parts closer than DBSCAN's reach overlap."""
+    join_base: float = field(default=0.02, metadata={"omit_default": True})
+    """Only clusters that reach down to within this of their surface stand on it and are
+    joined [m]: an object held above another is not part of it."""
+    piece_gap: float = field(default=0.05, metadata={"omit_default": True})
+    """Two clusters on the same surface whose footprints come this near [m] may be pieces
+    of one object (:func:`~smccli.perception.clusters.cluster_unions`): the floor of an
+    open box split from its near wall by depth holes came 2.5-27 mm near it (measured in
+    the three split frames left after ``join_overlap``, bench_pick_moving)."""
 
 
 def scene_perception(scene: Scene) -> PerceptionParams:
