@@ -305,3 +305,70 @@ def test_control_ticks_and_full_ik_agree_with_the_pinv_reference(name: str) -> N
         assert np.max(np.abs(q_new - q_old)) < AGREE
         verdicts.append(ok_new)
     assert any(verdicts)
+
+
+def _last_joint(sim: Sim) -> int:
+    return list(sim.joint_state().names).index(sim.robot.arm_joints[-1])
+
+
+def _yaw_travel(sim: Sim, target: np.ndarray, seconds: float = 3.0) -> float:
+    """Stream ``target`` for ``seconds``; how far the POI's yaw travelled [rad]."""
+    travel, last = 0.0, sim.poi()[3]
+    for _ in range(round(seconds / sim.control_period)):
+        sim.step(PoiCommand(sim.t, target, 1.0))
+        yaw = sim.poi()[3]
+        travel += abs(wrap(yaw - last))
+        last = yaw
+    return travel
+
+
+def test_a_goal_yaw_past_the_wrist_limit_is_taken_by_its_equivalent(
+    scene: Scene, model: mujoco.MjModel
+) -> None:
+    """A goal whose yaw the wrist reaches the short way only past its limit makes the hand
+    turn the long way round, nearly a full turn (a held box spun an open box with it,
+    issue 27); ``goal_from_object`` with the controller's ``yaw_ok`` takes the yaw the
+    gripper's half-turn symmetry makes equivalent, and the hand turns less than a half."""
+    from smccli.learn.frames import goal_from_object
+    from smccli.perception import Cluster
+
+    ctl = CartesianController(model, scene.robot)
+    hi = float(ctl.hi[-1])
+
+    def yaw_for(xy: tuple[float, float], wrist: float) -> float:
+        """The yaw that puts the last joint at ``wrist`` over ``xy``, pointing down."""
+        return wrap(ctl.wrist_short_way(np.array([*xy, 0.1, 0.0]), wrist) - wrist)
+
+    start = np.array([0.43, 0.10, 0.15, yaw_for((0.43, 0.10), hi - 0.3)])
+    box = Cluster(
+        centroid=np.array([0.44, 0.30, 0.035]),
+        yaw=0.0,
+        yaw_period=math.pi,
+        extents=np.array([0.26, 0.16, 0.07]),
+        histogram=np.full(8, 1 / 8),
+        n_points=500,
+    )
+    # A place goal over the box whose nearest yaw puts the wrist 0.6 rad past its limit.
+    goal_obj = np.array([0.0, 0.0, 0.075, yaw_for((0.44, 0.30), hi + 0.6)])
+    travel = {}
+    for name in ("nearest", "chosen"):
+        sim = Sim(scene)
+        try:
+            # Turn the wrist there continuously, as a demonstrated motion would.
+            w0 = float(sim.joint_state().position[_last_joint(sim)])
+            for w in np.linspace(w0, hi - 0.3, 200):
+                sim.step(PoiCommand(sim.t, np.r_[start[:3], yaw_for((0.43, 0.10), w)], 1.0))
+            _yaw_travel(sim, start, 1.0)
+            q_last = float(sim.joint_state().position[_last_joint(sim)])
+            assert abs(q_last - (hi - 0.3)) < 0.05
+            ok = lambda g, w=q_last: ctl.wrist_inside(ctl.wrist_short_way(g, w))  # noqa: E731
+            nearest = goal_from_object(goal_obj, box, near_yaw=sim.poi()[3])
+            chosen = goal_from_object(goal_obj, box, near_yaw=sim.poi()[3], yaw_ok=ok)
+            assert not ok(nearest) and ok(chosen)
+            assert abs(abs(wrap(chosen[3] - nearest[3])) - math.pi) < 1e-9
+            np.testing.assert_allclose(chosen[:3], nearest[:3], atol=1e-12)  # the same place
+            travel[name] = _yaw_travel(sim, nearest if name == "nearest" else chosen)
+        finally:
+            sim.close()
+    assert travel["chosen"] < math.pi
+    assert travel["nearest"] > 1.5 * math.pi, travel

@@ -341,8 +341,24 @@ class TreeExecutor:
             t_w = np.array([t for t, _ in self._weights])
             w_w = np.array([w for _, w in self._weights])
             weight = scale_reading(t_w, w_w, s.t, window)
-        obs = Observation(t=t, poi=s.poi(), camera=frame, robot_geometry=geometry, weight=weight)
+        obs = Observation(
+            t=t,
+            poi=s.poi(),
+            camera=frame,
+            robot_geometry=geometry,
+            weight=weight,
+            joints=self._arm_joints(),
+        )
         return obs, frame, acquire_s
+
+    def _arm_joints(self) -> np.ndarray | None:
+        """The arm's joint readings in ``robot.arm_joints`` order [rad]; None without them."""
+        names = self.sensors.robot.arm_joints
+        js = self.sensors.joint_state()
+        where = {n: i for i, n in enumerate(js.names)}
+        if not names or any(n not in where for n in names):
+            return None
+        return np.array([js.position[where[n]] for n in names], dtype=float)
 
     def stack(self, nodes: tuple[str, ...]) -> EdgeStack:
         return self.policy.stack(nodes)

@@ -42,7 +42,7 @@ from smccli.perception.distance import MIN_EXTENT, d_extents
 from smccli.perception.histogram import BC_MIN
 from smccli.perception.room import d_room, room_histogram
 from smccli.perception.scan import Scan2D, align_scans, chamfer
-from smccli.world.controller import reach_problem
+from smccli.world.controller import CartesianController, reach_problem
 from smccli.world.geometry import between
 from smccli.world.robot import Robot
 from smccli.world.sensors import CameraFrame, RobotGeometry
@@ -317,6 +317,9 @@ class Observation:
     lidar_pose: np.ndarray | None = None
     """The lidar's pose ``[x, y, yaw]`` in odometry's frame when the scan was taken
     [m, m, rad]. Needed with ``scan``: it maps a goal stored relative to the taught scan."""
+    joints: np.ndarray | None = None
+    """An arm's joint readings in ``robot.arm_joints`` order, shape (n,) [rad]: which way
+    its wrist turns to a goal (:meth:`TreePolicy.map_goal`). None: as the POI's yaw says."""
     base: np.ndarray | None = None
     """A mobile manipulator's base pose ``[x, y, yaw]`` from odometry [m, m, rad]; its
     ``poi`` is then the hand in odometry's frame (this pose composed with the hand in the
@@ -458,6 +461,7 @@ class TreePolicy:
         self._scan_alignment: dict[str, np.ndarray] = {}
         """At a base's decision: each matched edge's scan alignment T (3, 3)."""
         self._nodes: tuple[str, ...] = (ROOT,)
+        self._controller: CartesianController | None = None
 
     # --- the frontier ----------------------------------------------------------------------
 
@@ -550,7 +554,14 @@ class TreePolicy:
         start = base_now if a.poi == "base" else obs.poi
         assert start is not None
         goal = self.map_goal(
-            a, cluster, start, edge.id, obs.lidar_pose, obs.base, edge.smc.perception.cluster
+            a,
+            cluster,
+            start,
+            edge.id,
+            obs.lidar_pose,
+            obs.base,
+            edge.smc.perception.cluster,
+            wrist=None if obs.joints is None or a.poi is not None else float(obs.joints[-1]),
         )
         duration = action_duration(a, start, goal)
         dec = replace(dec, mapped_goal=goal, duration=duration)
@@ -677,6 +688,13 @@ class TreePolicy:
         )
         return dec, edge, cluster
 
+    def _kinematics(self) -> CartesianController:
+        """The arm's kinematics, as its controller sees them (built once)."""
+        if self._controller is None:
+            assert self.model is not None
+            self._controller = CartesianController(self.model, self.robot)
+        return self._controller
+
     def look_again(
         self, plan: Plan, seen: Cluster, clusters: Sequence[Cluster]
     ) -> tuple[Cluster, np.ndarray] | None:
@@ -718,7 +736,9 @@ class TreePolicy:
             clearer = seen.hidden >= hid or d < d_cluster(seen, taught, pp) - LOOK_BETTER
             if not clearer:
                 return None
-        start = plan.poses[0]
+        # The goal's yaw nearest the one decided (its choice among equivalent yaws, e.g.
+        # the one the wrist reaches inside its limits), from where the action started.
+        start = np.r_[plan.poses[0][:3], plan.goal[3]]
         goal = self.map_goal(edge.smc.action, c, start, edge.id, taught=taught)
         return c, goal
 
@@ -807,9 +827,17 @@ class TreePolicy:
         lidar_pose: np.ndarray | None = None,
         base: np.ndarray | None = None,
         taught: Cluster | None = None,
+        wrist: float | None = None,
     ) -> np.ndarray:
         """:func:`smccli.learn.frames.map_goal` for this robot, a scan-frame goal with the
-        alignment of ``edge``'s scan at the last decision (:meth:`_match_base`)."""
+        alignment of ``edge``'s scan at the last decision (:meth:`_match_base`). ``wrist``:
+        an arm's last joint now [rad]; with it, an object-frame goal's yaw is one the wrist
+        reaches the short way, inside its limits, where the gripper's or the object's
+        symmetry leaves a choice."""
+        yaw_ok = None
+        if wrist is not None and self.model is not None and not self.mobile_manipulator:
+            controller = self._kinematics()
+            yaw_ok = lambda g: controller.wrist_inside(controller.wrist_short_way(g, wrist))  # noqa: E731
         return frames.map_goal(
             action,
             cluster,
@@ -820,4 +848,5 @@ class TreePolicy:
             base=base,
             taught=taught,
             edge=edge,
+            yaw_ok=yaw_ok,
         )

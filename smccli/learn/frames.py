@@ -21,6 +21,7 @@ stays inverse (tests/test_frames.py checks the round trips).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -68,6 +69,7 @@ def goal_from_object(
     *,
     flip: bool = True,
     taught_yaw: float | None = None,
+    yaw_ok: Callable[[np.ndarray], bool] | None = None,
 ) -> np.ndarray:
     """Contingent action mapping of the goal (eq. 38-39): object-frame goal -> world.
 
@@ -83,27 +85,42 @@ def goal_from_object(
     nearest it keeps the offset on the side it was taught, e.g. towards the camera when the
     cluster's centre sits behind a bar handle (its posts pull it back). Without it the
     tie went to whichever side the footprint's yaw wrapped to (3 cm off a handle).
+
+    ``yaw_ok`` (a goal ``[x, y, z, yaw]`` -> bool) leaves out goals the wrist reaches only
+    the long way round, past its limit (``CartesianController.wrist_short_way``): a box
+    held at yaw -1.5 and placed at -2.8 turned the hand a full turn inside the open box,
+    with both boxes; its equivalent 0.3 was 1.4 rad of wrist away. If none is left, as
+    without it.
     """
     base = object_yaw(cluster)
     period = cluster.yaw_period if cluster.yaw_period > 0 else math.pi
-    best: tuple[float, float, float, float] | None = None
-    for k_obj in range(-4, 5):
-        obj_yaw = base + k_obj * period
-        if cluster.yaw_period <= 0 and k_obj != 0:
-            continue
-        turn = 0.0 if taught_yaw is None else abs(wrap(obj_yaw - taught_yaw))
-        for k_grip in range(-2, 3) if flip else range(-1, 2):
-            yaw = obj_yaw + goal_obj[3] + k_grip * (math.pi if flip else TWO_PI)
-            dist = abs(yaw - near_yaw)
-            if (
-                best is None
-                or dist < best[0] - 1e-9
-                or (dist < best[0] + 1e-9 and turn < best[3] - 1e-9)
-            ):
-                best = (dist, yaw, obj_yaw, turn)
-    assert best is not None
-    _, yaw, obj_yaw, _ = best
-    return np.array([*from_frame([*cluster.centroid, obj_yaw], goal_obj[:3]), yaw])
+
+    def goal_at(obj_yaw: float, yaw: float) -> np.ndarray:
+        return np.array([*from_frame([*cluster.centroid, obj_yaw], goal_obj[:3]), yaw])
+
+    def pick(ok: Callable[[np.ndarray], bool] | None) -> np.ndarray | None:
+        best: tuple[float, float, float, float] | None = None
+        for k_obj in range(-4, 5):
+            obj_yaw = base + k_obj * period
+            if cluster.yaw_period <= 0 and k_obj != 0:
+                continue
+            turn = 0.0 if taught_yaw is None else abs(wrap(obj_yaw - taught_yaw))
+            for k_grip in range(-2, 3) if flip else range(-1, 2):
+                yaw = obj_yaw + goal_obj[3] + k_grip * (math.pi if flip else TWO_PI)
+                dist = abs(yaw - near_yaw)
+                if (
+                    best is None
+                    or dist < best[0] - 1e-9
+                    or (dist < best[0] + 1e-9 and turn < best[3] - 1e-9)
+                ) and (ok is None or ok(goal_at(obj_yaw, yaw))):
+                    best = (dist, yaw, obj_yaw, turn)
+        return None if best is None else goal_at(best[2], best[1])
+
+    goal = pick(yaw_ok) if yaw_ok is not None else None
+    if goal is None:
+        goal = pick(None)
+    assert goal is not None
+    return goal
 
 
 # --- scan ------------------------------------------------------------------------------
@@ -171,6 +188,7 @@ def map_goal(
     base: np.ndarray | None = None,
     taught: Cluster | None = None,
     edge: str | None = None,
+    yaw_ok: Callable[[np.ndarray], bool] | None = None,
 ) -> np.ndarray:
     """Contingent action mapping of the goal (eq. 38-39, 46): the action's goal in the
     world ``[x, y, z, yaw]``, the yaw the turn nearest the POI's now.
@@ -179,7 +197,8 @@ def map_goal(
     the demonstrated one); ``gripper`` whether the robot has one; a scan-frame goal needs
     the ``alignment`` of the taught scan to today's and the ``lidar_pose`` now; a goal in a
     mobile manipulator's base frame needs the ``base`` pose ``[x, y, yaw]``. ``edge`` names
-    the SMC in errors."""
+    the SMC in errors; ``yaw_ok``: of an object-frame goal's equivalent yaws, those the
+    wrist reaches the short way (:func:`goal_from_object`)."""
     if action.goal_frame == "scan":
         if alignment is None or lidar_pose is None:
             raise SmcError(
@@ -205,7 +224,12 @@ def map_goal(
         flip = flip and cluster.yaw_period < TWO_PI - 1e-6
         taught_yaw = None if taught is None else float(taught.yaw)
         goal = goal_from_object(
-            action.goal, cluster, near_yaw=float(start[3]), flip=flip, taught_yaw=taught_yaw
+            action.goal,
+            cluster,
+            near_yaw=float(start[3]),
+            flip=flip,
+            taught_yaw=taught_yaw,
+            yaw_ok=yaw_ok,
         )
     else:
         goal = np.array(action.goal, dtype=float)

@@ -37,6 +37,9 @@ _RCOND = 1e-4
 """Singular values of ``J`` below this fraction of the largest are zero in ``J⁺``."""
 _AT_LIMIT = 1e-9
 """A joint this close to a limit [rad] is at it."""
+WRIST_MARGIN = 0.05
+"""The wrist roll (the last joint) keeps this far inside its limits [rad]: a yaw it would
+reach only beyond is reached the long way round (:meth:`CartesianController.yaw_subgoal`)."""
 TRACKED = (1e-4, 1e-3)
 """Within this of its target, position [m] and orientation [rad], a control period's
 POI needs no further IK iteration: the first one leaves a median 9 µm and 3 µrad (p90
@@ -249,7 +252,7 @@ class CartesianController:
         q1 = math.atan2(y, x)
         base = wrap(q1 + self._yaw_offset - target_yaw)
         branches = [base + k * 2 * math.pi for k in (-1, 0, 1)]
-        inside = [b for b in branches if self._last_lo + 0.05 < b < self._last_hi - 0.05]
+        inside = [b for b in branches if self.wrist_inside(b)]
         q_last = min(inside or branches, key=lambda b: abs(b - q_last_now))
         self._q_last_goal = min(max(q_last, self._last_lo), self._last_hi)
         planned = (q1 - q_last) - (q_first - q_last_now)  # unwrapped yaw change on that branch
@@ -258,6 +261,21 @@ class CartesianController:
         sub[:] = target
         sub[3] = yaw + min(max(d, -0.5), 0.5)
         return sub
+
+    def wrist_inside(self, q_last: float) -> bool:
+        """Whether the last joint at ``q_last`` [rad] is :data:`WRIST_MARGIN` inside its limits."""
+        return self._last_lo + WRIST_MARGIN < q_last < self._last_hi - WRIST_MARGIN
+
+    def wrist_short_way(self, target: np.ndarray, q_last_now: float) -> float:
+        """The last joint's angle [rad] that points the gripper down at ``target``'s yaw
+        (``[x, y, z, yaw]``) in the home posture's shape, on the branch nearest
+        ``q_last_now``: where the wrist turns the short way. If it is not
+        :meth:`wrist_inside` the limits, :meth:`yaw_subgoal` turns the hand the long way
+        round instead, nearly a full turn with whatever it holds (what a goal yaw equivalent
+        by the gripper's symmetry avoids, :func:`~smccli.learn.frames.goal_from_object`)."""
+        x, y, _, target_yaw = np.asarray(target, dtype=float).tolist()
+        base = wrap(math.atan2(y, x) + self._yaw_offset - target_yaw)
+        return base + 2 * math.pi * round((q_last_now - base) / (2 * math.pi))
 
     def update(self, target: np.ndarray) -> np.ndarray:
         """Joint targets for this control tick, shape (n,) [rad]; joint speed is capped.
