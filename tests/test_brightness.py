@@ -13,10 +13,12 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 from smccli.bench.learning import SCENE  # noqa: E402
-from smccli.learn.contingency import _mean_cluster  # noqa: E402
+from smccli.learn.contingency import _mean_cluster, match_context  # noqa: E402
+from smccli.learn.params import SmcParams  # noqa: E402
+from smccli.learn.smc import SalientPerceptions  # noqa: E402
 from smccli.perception import clusters_from_frame, d_cluster  # noqa: E402
 from smccli.perception.clusters import cluster_from_dict, cluster_to_dict  # noqa: E402
-from smccli.perception.params import scene_perception  # noqa: E402
+from smccli.perception.params import PerceptionParams, scene_perception  # noqa: E402
 from smccli.world.layout import sample_layout  # noqa: E402
 from smccli.world.scene import load_scene  # noqa: E402
 from smccli.world.sim import Sim  # noqa: E402
@@ -69,12 +71,14 @@ def test_white_is_brighter_than_grey_relative_to_the_table_in_every_frame(views)
         if {"white_box", "grey_bar"} <= f.keys()
     ]
     assert len(white) >= 8 and len(both) >= 8
-    assert np.isfinite(white).all() and np.isfinite(both).all()
+    assert np.isfinite(white).all()
+    # Right under the camera the grey bar's sides are a few pixels: unknown, not its top.
+    measured = [(w, g) for w, g in both if np.isfinite(g)]
+    assert len(measured) >= 8, both
     # In the same frame, whatever its exposure, the white box is the brighter one ...
-    assert all(w > 1.05 * g for w, g in both), both
-    # ... and across frames its median stays above the grey bar's (a single white view
-    # may fall below a grey bar seen from above, all top: its sides hidden).
-    assert np.median(white) > 1.3 * np.median([g for _, g in both]), (white, both)
+    assert all(w > 1.05 * g for w, g in measured), both
+    # ... and across frames its median stays above the grey bar's.
+    assert np.median(white) > 1.3 * np.median([g for _, g in measured]), (white, both)
     # The same box stays itself: its spread is the shading of its sides as it turns.
     assert max(white) / min(white) < math.exp(0.4), white
 
@@ -88,8 +92,19 @@ def test_the_term_separates_what_the_histogram_alone_confuses(views):
         for _, b in frames
         if a is not b and "white_box" in a and {"white_box", "grey_bar"} <= b.keys()
     ]
-    wrong_off = sum(d_cluster(w, g, off) <= d_cluster(w, v, off) for w, v, g in pairs)
-    wrong_on = sum(d_cluster(w, g, params) <= d_cluster(w, v, params) for w, v, g in pairs)
+
+    def wrong(p: PerceptionParams) -> int:
+        """Pairs where an SMC taught on one view of the white box takes the grey bar."""
+        smc = SmcParams(perception=p)
+        return sum(
+            match_context(
+                SalientPerceptions(cluster=w, weight=None), [v, g], None, smc
+            ).cluster_index
+            == 1
+            for w, v, g in pairs
+        )
+
+    wrong_off, wrong_on = wrong(off), wrong(params)
     # The demonstrated white box is nearer to the grey bar than to itself in some frames
     # with the histogram alone; with the brightness term, in far fewer.
     assert wrong_off >= 3, wrong_off
@@ -114,3 +129,15 @@ def test_trees_from_before_load_and_merge_without_the_term(views):
     assert _mean_cluster(white, old, 3, 1).brightness == white.brightness
     two = _mean_cluster(dataclasses.replace(white, brightness=1.0), brighter, 1, 1)
     assert two.brightness == pytest.approx(3.0)
+
+
+def test_a_view_whose_brightness_is_unknown_ranks_after_measured_ones():
+    """``ranked``: contingent and measured, then contingent and unmeasured, then the rest;
+    by D_P within each; the vectorised order equals ``match_context``'s."""
+    from smccli.execute.policy import ranked
+
+    d = np.array([[0.03, 0.05, 0.2, 0.08], [0.15, 0.04, 0.3, 0.12]])
+    unmeasured = np.array([[True, False, False, True], [False, True, False, False]])
+    assert list(np.argsort(ranked(d, unmeasured, T_HP)[0])) == [1, 0, 3, 2]
+    # An unmeasured contingent view beats every non-contingent measured one.
+    assert int(np.argmin(ranked(d, unmeasured, T_HP)[1])) == 1

@@ -127,6 +127,21 @@ class EdgeStack:
         )
 
 
+def ranked(d: np.ndarray, unmeasured: np.ndarray, t_hp: float) -> np.ndarray:
+    """The order in which clusters match an SMC, from their D_P ``d`` (..., C): first the
+    contingent ones (D_P < ``t_hp``) whose every term was measured, then the contingent
+    ones ``unmeasured`` (bool, same shape: a term the SMC has that this view could not
+    measure, e.g. the brightness of a box seen from right above, its sides out of sight),
+    then the rest; by D_P within each. A grey bar right under the camera otherwise matched
+    a white box's SMC better than the white box (issue 27). The D_P itself is unchanged."""
+    tier = np.where(d < t_hp, np.where(unmeasured, 1.0, 0.0), 2.0)
+    return tier * RANK_TIER + d
+
+
+RANK_TIER = 1e6
+"""Larger than any finite D_P: :func:`ranked` orders by tier, then by D_P."""
+
+
 def match_edges(
     stack: EdgeStack, clusters: Sequence[Cluster], weight: float | None, params: SmcParams
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -150,12 +165,15 @@ def match_edges(
             )
             d_e = np.abs(stack.log_ext[:, None, :] - ec[None, :, :]).max(axis=2)
             dc = d_h / pp.hist_scale + d_e / pp.extent_scale
+            rank = dc
             if pp.brightness_scale > 0:
                 lb = np.log(np.array([c.brightness for c in clusters], dtype=np.float64))
                 d_b = np.abs(stack.log_brightness[:, None] - lb[None, :])
-                d_b = np.where(np.isnan(d_b), 0.0, d_b)  # no table, or a tree from before
-                dc = dc + d_b / pp.brightness_scale
-            best = np.argmin(dc, axis=1)
+                unknown = np.isnan(d_b)  # no table, too little of the sides, an old tree
+                dc = dc + np.where(unknown, 0.0, d_b) / pp.brightness_scale
+                unmeasured = unknown & ~np.isnan(stack.log_brightness)[:, None]
+                rank = ranked(dc, unmeasured, params.t_hp)
+            best = np.argmin(rank, axis=1)
             d = np.where(stack.has_cluster, dc[np.arange(n), best], 0.0)
             idx = np.where(stack.has_cluster, best, -1)
         else:

@@ -212,7 +212,19 @@ def match_context(
         if not clusters:
             return Match(d_p=INF, cluster_index=None, contingent=False)
         dists = [d_cluster(c, stored.cluster, params.perception) for c in clusters]
-        index = int(np.argmin(dists))
+        # Views whose brightness is unknown while the SMC's is not come after the measured
+        # ones (smccli.execute.policy.ranked, which this mirrors).
+        unmeasured = [
+            params.perception.brightness_scale > 0
+            and math.isnan(c.brightness)
+            and not math.isnan(stored.cluster.brightness)
+            for c in clusters
+        ]
+        tiers = [
+            (0 if d < params.t_hp and not u else 1 if d < params.t_hp else 2, d)
+            for d, u in zip(dists, unmeasured, strict=True)
+        ]
+        index = min(range(len(clusters)), key=lambda i: tiers[i])
         total += dists[index]
     if stored.weight is not None:
         if weight is None:

@@ -11,7 +11,7 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
 
-from smccli.perception.brightness import relative_brightness
+from smccli.perception.brightness import relative_brightness, side_points
 from smccli.perception.cloud import (
     crop_faces,
     in_crop_frame,
@@ -515,8 +515,7 @@ def describe_points(
     cluster = describe_cluster(points, colors, plane, params, seg.cut[idx])
     brightness = cluster.brightness
     if params.brightness_scale > 0:
-        heights = heights_above(points, plane)
-        side = heights <= heights.max() - params.top_band  # below the top layer
+        side = side_points(heights_above(points, plane))
         brightness = relative_brightness(points, colors, side, *seg.table, params)
     cluster = replace(cluster, brightness=brightness, hidden=int(seg.occluded[idx].sum()))
     faces = crop_faces(
