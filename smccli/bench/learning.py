@@ -1,6 +1,6 @@
 """Learning curve: success against the number of demonstrations merged (issue 27, part 4).
 
-``python -m smccli.bench.learning [--demos 1 2 4 8] [--trials 100] [--workers 2]``
+``python -m smccli.bench.learning [--demos 1 2 4 8] [--trials 300] [--workers 2]``
 
 The paper teaches from one demonstration; users give a few, each from another layout, each
 clumsy in its own way. Here :data:`DEMOS` human-like demonstrations of bench_pick
@@ -169,7 +169,7 @@ def figure(rows: list[dict[str, Any]], out: Path) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--demos", type=int, nargs="+", default=[1, 2, 4, 8])
-    ap.add_argument("--trials", type=int, default=100)
+    ap.add_argument("--trials", type=int, default=300)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--separability-layouts", type=int, default=30)
