@@ -529,11 +529,21 @@ def replay(
             "(up to the tree's limit: the robot's POI is held to 0.5 m/s)."
         ),
     ] = 1.0,
+    look_period: Annotated[
+        float | None,
+        typer.Option(
+            help="While an arm acts on an object, look at it again every this many seconds "
+            "and move the goal where it went (0: never; default 1).",
+        ),
+    ] = None,
 ) -> None:
     """Execute the tree autonomously in simulation: one episode or a campaign."""
     from smccli.execute import run_episode
+    from smccli.execute.executor import LOOK_PERIOD
     from smccli.execute.verify import verify_log
     from smccli.world.sim import OdometryDrift
+
+    look = LOOK_PERIOD if look_period is None else look_period
 
     if verify is not None:
         if tree is not None or trials > 0:
@@ -563,6 +573,7 @@ def replay(
             drift=drift,
             cluster=cluster,
             speed=speed,
+            look_period=look,
         )
         _print_campaign(summary)
         if min_success is not None and summary["success_rate"] < min_success:
@@ -580,6 +591,7 @@ def replay(
         drift=drift,
         teach=None if teach is None else _teach_config(tree, teach, script),
         speed=speed,
+        look_period=look,
     )
     _print_episode(result)
     if result.outcome != "success":

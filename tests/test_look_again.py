@@ -67,3 +67,30 @@ def test_a_box_pushed_5cm_during_the_approach_is_still_grasped(sample_trees):
     blind = sum(r.success for r in results[0.0])
     assert looking == len(pushes), [r.reason for r in results[0.5] if not r.success]
     assert blind <= len(pushes) - 2, blind  # what looking again is for
+
+
+def test_look_period_on_the_command_line(sample_trees, tmp_path, monkeypatch, capsys):
+    """``smc replay --look-period``: a negative one is a one-line error (exit 2); 0 runs
+    without looking and the campaign report says so."""
+    import json
+    import sys
+
+    from smccli.cli import main
+
+    tree = sample_trees["bench_pick"]
+    monkeypatch.setenv("COLUMNS", "250")
+    monkeypatch.setattr(sys, "argv", ["smc", "replay", str(tree), "--look-period", "-1"])
+    with pytest.raises(SystemExit) as exit_:
+        main()
+    assert exit_.value.code == 2
+    lines = [ln for ln in capsys.readouterr().err.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1 and "--look-period must be" in lines[0], lines
+    report = tmp_path / "r.json"
+    argv = ["smc", "replay", str(tree), "--trials", "2", "--workers", "1"]
+    argv += ["--look-period", "0", "--report", str(report)]
+    monkeypatch.setattr(sys, "argv", argv)
+    with pytest.raises(SystemExit) as exit_:
+        main()
+    assert exit_.value.code in (0, None)
+    doc = json.loads(report.read_text())
+    assert doc["look_period"] == 0 and doc["successes"] == 2

@@ -40,7 +40,7 @@ from threadpoolctl import threadpool_limits  # noqa: E402
 from smccli.errors import SmcError  # noqa: E402
 from smccli.execute.episode import episode, layout_for, resolve, scene_note  # noqa: E402
 from smccli.execute.evaluation import OUTCOMES  # noqa: E402
-from smccli.execute.executor import check_speed  # noqa: E402
+from smccli.execute.executor import LOOK_PERIOD, check_look_period, check_speed  # noqa: E402
 from smccli.learn.tree import Tree, digest  # noqa: E402
 from smccli.outputs import check_output, write_atomic  # noqa: E402
 from smccli.world.geometry import wrap  # noqa: E402
@@ -194,6 +194,7 @@ def run_trial(
     drift: OdometryDrift | None = None,
     speed: float = 1.0,
     sims: SimCache | None = None,
+    look_period: float = LOOK_PERIOD,
 ) -> TrialResult:
     """Trial ``index`` of the campaign with ``seed``, its DMPs ``speed`` times faster; the
     distance bands are over the manipulated object's start, or a mobile base's. The
@@ -201,7 +202,16 @@ def run_trial(
     layout = layout_for(scene, seed, index)
     sim = (sims or _SIMS).get(scene, drift)
     with threadpool_limits(limits=1):
-        r = episode(tree, scene, layout, seed=seed, drift=drift, speed=speed, sim=sim)
+        r = episode(
+            tree,
+            scene,
+            layout,
+            seed=seed,
+            drift=drift,
+            speed=speed,
+            sim=sim,
+            look_period=look_period,
+        )
     obj = r.manipulated
     dist = yaw = 0.0
     distances = demo_distances(scene, layout, demo_layouts(tree))
@@ -256,14 +266,29 @@ _WORKER: dict[str, Any] = {}
 
 
 def _init_worker(
-    tree: Tree, scene: Scene, seed: int, drift: OdometryDrift | None, speed: float = 1.0
+    tree: Tree,
+    scene: Scene,
+    seed: int,
+    drift: OdometryDrift | None,
+    speed: float = 1.0,
+    look_period: float = LOOK_PERIOD,
 ) -> None:
-    _WORKER.update(tree=tree, scene=scene, seed=seed, drift=drift, speed=speed)
+    _WORKER.update(
+        tree=tree, scene=scene, seed=seed, drift=drift, speed=speed, look_period=look_period
+    )
 
 
 def _work(index: int) -> TrialResult:
     w = _WORKER
-    return run_trial(w["tree"], w["scene"], w["seed"], index, w["drift"], w["speed"])
+    return run_trial(
+        w["tree"],
+        w["scene"],
+        w["seed"],
+        index,
+        w["drift"],
+        w["speed"],
+        look_period=w["look_period"],
+    )
 
 
 CLUSTER_TIMEOUT = 10.0
@@ -302,6 +327,7 @@ def _cluster_trials(
     todo: list[int],
     address: str,
     speed: float = 1.0,
+    look_period: float = LOOK_PERIOD,
 ) -> Iterator[TrialResult]:
     """Each trial of ``todo`` as one task on the Dask cluster at ``address``, yielded as
     they finish. The tree and the scene go to every worker once, not with each task."""
@@ -310,7 +336,17 @@ def _cluster_trials(
     with cluster_client(address) as client:
         tree_f, scene_f = client.scatter([tree, scene], broadcast=True, hash=False)
         futures = [
-            client.submit(run_trial, tree_f, scene_f, seed, i, drift, speed, pure=False)
+            client.submit(
+                run_trial,
+                tree_f,
+                scene_f,
+                seed,
+                i,
+                drift,
+                speed,
+                look_period=look_period,
+                pure=False,
+            )
             for i in todo
         ]
         try:
@@ -332,11 +368,12 @@ def run_trials(
     drift: OdometryDrift | None = None,
     cluster: str | None = None,
     speed: float = 1.0,
+    look_period: float = LOOK_PERIOD,
 ) -> list[TrialResult]:
     """Run the trials (``range(trials)`` or ``indices``) over ``workers`` processes, or on
     the Dask cluster whose scheduler is at ``cluster``; results in index order, the same
     either way. ``on_trial(done, successes)`` after each; ``speed``: every DMP that many
-    times faster."""
+    times faster; ``look_period``: how often an arm looks again at what it acts on [s]."""
     todo = list(range(trials)) if indices is None else list(indices)
     results: list[TrialResult] = []
     ok = 0
@@ -349,13 +386,13 @@ def run_trials(
             on_trial(len(results), ok)
 
     if cluster is not None:
-        for res in _cluster_trials(tree, scene, seed, drift, todo, cluster, speed):
+        for res in _cluster_trials(tree, scene, seed, drift, todo, cluster, speed, look_period):
             done(res)
     elif workers <= 1 or len(todo) <= 1:
         sims = SimCache()  # this process's: freed when the campaign ends
         try:
             for i in todo:
-                done(run_trial(tree, scene, seed, i, drift, speed, sims))
+                done(run_trial(tree, scene, seed, i, drift, speed, sims, look_period))
         finally:
             sims.close()
     else:
@@ -363,7 +400,7 @@ def run_trials(
         with ctx.Pool(
             min(workers, len(todo)),
             initializer=_init_worker,
-            initargs=(tree, scene, seed, drift, speed),
+            initargs=(tree, scene, seed, drift, speed, look_period),
         ) as pool:
             for res in pool.imap_unordered(_work, todo, chunksize=1):
                 done(res)
@@ -475,11 +512,14 @@ def run_campaign(
     drift: OdometryDrift | None = None,
     cluster: str | None = None,
     speed: float = 1.0,
+    look_period: float = LOOK_PERIOD,
 ) -> dict[str, Any]:
     """``smc replay TREE --trials N --seed S --workers W [--report FILE]``: the summary.
     ``cluster``: the address of a Dask scheduler whose workers run the trials instead
     (``--cluster``; ``workers`` is then theirs); ``speed``: every DMP that many times
-    faster (``--speed``; SmcError beyond the tree's limit, before the first trial).
+    faster (``--speed``; SmcError beyond the tree's limit, before the first trial);
+    ``look_period``: how often an arm looks again at what it acts on (``--look-period``
+    [s], 0: never).
 
     The report is checked before the first trial (folder writable; an existing file needs
     ``force``) and written atomically.
@@ -490,6 +530,7 @@ def run_campaign(
         check_output(report, force=force)
     t, sc = resolve(tree, scene)
     check_speed(t, speed)
+    check_look_period(look_period)
     wall0 = time.perf_counter()
     if cluster is not None:
         with cluster_client(cluster) as client:  # fail before the first trial, not after
@@ -504,6 +545,7 @@ def run_campaign(
         drift=drift,
         cluster=cluster,
         speed=speed,
+        look_period=look_period,
     )
     summary = summarize(
         results,
@@ -519,6 +561,7 @@ def run_campaign(
     summary["odometry_drift"] = None if drift is None else asdict(drift)
     summary["cluster"] = cluster
     summary["speed"] = speed
+    summary["look_period"] = look_period
     if report is not None:
         write_atomic(report, json.dumps(summary, indent=1, allow_nan=False) + "\n")
     return summary

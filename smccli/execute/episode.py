@@ -28,6 +28,7 @@ from smccli.execute.executor import (
     ActionTrace,
     Decision,
     TreeExecutor,
+    check_look_period,
     check_speed,
 )
 from smccli.execute.replay_log import ReplayLog
@@ -394,10 +395,12 @@ def run_episode(
     drift: OdometryDrift | None = None,
     teach: TeachConfig | None = None,
     speed: float = 1.0,
+    look_period: float = LOOK_PERIOD,
 ) -> EpisodeResult:
     """``smc replay TREE``: one episode on the layout file or the seed's layout (trial 0);
     ``teach``: an operator continues where no SMC is contingent (``--teach``); ``speed``:
-    every DMP that many times faster (``--speed``).
+    every DMP that many times faster (``--speed``); ``look_period``: how often an arm looks
+    again at what it acts on (``--look-period`` [s], 0: never).
 
     Raises TreeError/SceneError (exit 2) for a bad tree or scene, SmcError (exit 2) for a
     speed beyond the tree's limit, OutputError before any work when an output cannot be
@@ -410,6 +413,7 @@ def run_episode(
             check_output(out, force=force)
     t, sc = resolve(tree, scene)
     check_speed(t, speed)
+    check_look_period(look_period)
     if layout is None:
         lay = layout_for(sc, seed)
     elif isinstance(layout, dict):
@@ -419,7 +423,16 @@ def run_episode(
     if teach is not None:
         check_teach(teach)
     result = episode(
-        t, sc, lay, seed=seed, output=output, force=force, drift=drift, teach=teach, speed=speed
+        t,
+        sc,
+        lay,
+        seed=seed,
+        output=output,
+        force=force,
+        drift=drift,
+        teach=teach,
+        speed=speed,
+        look_period=look_period,
     )
     result = replace(result, note=scene_note(t, sc))
     if report is not None:

@@ -212,6 +212,15 @@ def check_speed(tree: Tree, speed: float) -> None:
         )
 
 
+def check_look_period(look_period: float) -> None:
+    """SmcError (one line, exit 2) unless ``look_period`` is a number >= 0 [s]."""
+    if not (math.isfinite(look_period) and look_period >= 0):
+        raise SmcError(
+            f"--look-period must be a number of seconds >= 0 (0: never look again), "
+            f"got {look_period:g}"
+        )
+
+
 def at_speed(tree: Tree, speed: float) -> Tree:
     """``tree`` with every DMP ``speed`` times faster (tau / speed); the same tree at 1."""
     if speed == 1.0:
