@@ -339,6 +339,37 @@ JOIN_CELL = 0.002
 thinnest wall of the built-in objects."""
 
 
+def support_of(
+    points: np.ndarray, planes: list[np.ndarray], params: PerceptionParams
+) -> np.ndarray | None:
+    """The plane ``points`` (n, 3) stand on: on a tabletop its one table; among shelves
+    and cabinet tops (``remove_walls``), the one just below them."""
+    if params.remove_walls:
+        return support_plane(points, planes)
+    return planes[0] if planes else None
+
+
+def standing_clusters(
+    points: np.ndarray,
+    labels: np.ndarray,
+    planes: list[np.ndarray],
+    params: PerceptionParams,
+    min_points: int,
+) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """(label, point indices, support plane) of each cluster of at least ``min_points``
+    that reaches down to within ``join_base`` of the plane it stands on: what stands on a
+    surface, not what is held above it."""
+    out = []
+    for k in range(int(labels.max(initial=-1)) + 1):
+        idx = np.flatnonzero(labels == k)
+        if len(idx) < min_points:
+            continue
+        plane = support_of(points[idx], planes, params)
+        if plane is not None and float(heights_above(points[idx], plane).min()) <= params.join_base:
+            out.append((k, idx, plane))
+    return out
+
+
 def join_split_parts(
     points: np.ndarray,
     labels: np.ndarray,
@@ -358,21 +389,10 @@ def join_split_parts(
     n_labels = int(labels.max(initial=-1)) + 1
     if n_labels < 2:
         return labels
-    standing: list[tuple[int, np.ndarray, int]] = []  # (label, xy, support plane index)
-    for k in range(n_labels):
-        idx = np.flatnonzero(labels == k)
-        if len(idx) < 3:
-            continue
-        pts = points[idx]
-        if params.remove_walls:
-            plane = support_plane(pts, planes)
-            which = next((i for i, p in enumerate(planes) if p is plane), -1)
-        else:
-            plane = planes[0] if planes else None
-            which = 0
-        if plane is None or float(heights_above(pts, plane).min()) > params.join_base:
-            continue
-        standing.append((k, pts[:, :2].astype(np.float64), which))
+    standing = [
+        (k, points[idx, :2].astype(np.float64), plane)
+        for k, idx, plane in standing_clusters(points, labels, planes, params, min_points=3)
+    ]
     parent = np.arange(n_labels)
 
     def root(a: int) -> int:
@@ -383,7 +403,7 @@ def join_split_parts(
     grow = max(int(round(params.join_margin / JOIN_CELL)), 0)
     for i, (a, xa, pa) in enumerate(standing):
         for b, xb, pb in standing[i + 1 :]:
-            if pa != pb or root(a) == root(b):
+            if pa is not pb or root(a) == root(b):
                 continue
             reach = 2 * params.join_margin
             if np.any(
@@ -496,14 +516,6 @@ def segment_frame(
     return Segmentation(points, colors, planes, table, labels, cut, occluded)
 
 
-def _support(seg: Segmentation, idx: np.ndarray, params: PerceptionParams) -> np.ndarray | None:
-    """The plane points ``idx`` stand on: on a tabletop its one table; among shelves and
-    cabinet tops, the one just below."""
-    if params.remove_walls:
-        return support_plane(seg.points[idx], seg.planes)
-    return seg.planes[0] if seg.planes else None
-
-
 def describe_points(
     seg: Segmentation, idx: np.ndarray, params: PerceptionParams, base: np.ndarray | None
 ) -> Cluster:
@@ -511,7 +523,7 @@ def describe_points(
     brightness, the points hidden by something in front and the crop box's faces it
     reaches."""
     points, colors = seg.points[idx], seg.colors[idx]
-    plane = _support(seg, idx, params)
+    plane = support_of(points, seg.planes, params)
     cluster = describe_cluster(points, colors, plane, params, seg.cut[idx])
     brightness = cluster.brightness
     if params.brightness_scale > 0:
@@ -572,15 +584,12 @@ def cluster_unions(
     :func:`clusters_from_frame`.
     """
     seg = segment_frame(frame, robot, params, base)
-    parts = []
-    for k in range(int(seg.labels.max(initial=-1)) + 1):
-        idx = np.flatnonzero(seg.labels == k)
-        if len(idx) < params.min_cluster_points:
-            continue
-        plane = _support(seg, idx, params)
-        if plane is None or float(heights_above(seg.points[idx], plane).min()) > params.join_base:
-            continue
-        parts.append((idx, plane, cKDTree(seg.points[idx, :2])))
+    parts = [
+        (idx, plane, cKDTree(seg.points[idx, :2]))
+        for _, idx, plane in standing_clusters(
+            seg.points, seg.labels, seg.planes, params, params.min_cluster_points
+        )
+    ]
     found = []
     for i, (ia, pa, ta) in enumerate(parts):
         for ib, pb, tb in parts[i + 1 :]:
