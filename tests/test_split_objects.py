@@ -127,3 +127,25 @@ def test_moving_box_trials_that_saw_it_in_pieces_now_place_it(tmp_path):
     for i in (2, 31, 125, 149, 272, 281):
         r = episode(tree, scene, layout_for(scene, 0, i), seed=0)
         assert r.success, f"trial {i}: {r.outcome}: {r.reason}"
+
+
+def test_unions_are_tried_at_a_node_of_several_children_when_nothing_matches(sample_trees):
+    """Where no child of a node with several SMCs is contingent (pick_place's tree shown
+    bench_pick_moving's objects, the box in pieces), the unions are matched too and the
+    decision still says no child is contingent (a loco_manip campaign crashed there)."""
+    from smccli.execute.policy import Observation, TreePolicy
+
+    tree, taught_scene = resolve(sample_trees["pick_place"], None)
+    node = next(n for n in tree.nodes if len(tree.children(n)) >= 2)
+    scene = load_scene(MOVING)
+    sim = Sim(scene, layout_for(scene, 0, 125))
+    try:
+        obs = Observation(
+            t=sim.t, poi=sim.poi(), camera=sim.render_camera(), robot_geometry=sim.robot_geometry()
+        )
+    finally:
+        sim.close()
+    policy = TreePolicy(tree, taught_scene.robot, taught_scene.model())
+    dec, edge, cluster = policy.match(obs, (node,))
+    assert edge is None and cluster is None and dec.chosen is None
+    assert dec.n_clusters >= 2 and len(dec.candidates) >= 2

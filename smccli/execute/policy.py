@@ -668,7 +668,7 @@ class TreePolicy:
         d, idx = match_edges(stack, clusters, obs.weight, self.params)
         ok = d < self.params.t_hp
         n_seen, union_s = len(clusters), 0.0
-        if not ok.any() and obs.camera is not None and n_seen >= 2 and stack.has_cluster:
+        if not ok.any() and obs.camera is not None and n_seen >= 2 and stack.has_cluster.any():
             # Nothing contingent: the object may be in pieces (an open box's near wall and
             # its floor, apart across a band of depth holes). Its taught perception says
             # whether two neighbouring clusters together are it; only here, so a decision
