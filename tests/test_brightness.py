@@ -134,7 +134,7 @@ def test_trees_from_before_load_and_merge_without_the_term(views):
 def test_a_view_whose_brightness_is_unknown_ranks_after_measured_ones():
     """``ranked``: contingent and measured, then contingent and unmeasured, then the rest;
     by D_P within each; the vectorised order equals ``match_context``'s."""
-    from smccli.execute.policy import ranked
+    from smccli.learn.contingency import ranked
 
     d = np.array([[0.03, 0.05, 0.2, 0.08], [0.15, 0.04, 0.3, 0.12]])
     unmeasured = np.array([[True, False, False, True], [False, True, False, False]])

@@ -32,7 +32,7 @@ import numpy as np
 from smccli.errors import SmcError, TreeError
 from smccli.learn import frames
 from smccli.learn.contingency import d_p as d_p_stored
-from smccli.learn.contingency import goal_gap
+from smccli.learn.contingency import goal_gap, ranked
 from smccli.learn.dmp import rollout
 from smccli.learn.params import SmcParams
 from smccli.learn.smc import Action
@@ -125,21 +125,6 @@ class EdgeStack:
             has_weight=np.array([w is not None for w in weights], dtype=bool),
             weight=np.array([0.0 if w is None else float(w) for w in weights]),
         )
-
-
-def ranked(d: np.ndarray, unmeasured: np.ndarray, t_hp: float) -> np.ndarray:
-    """The order in which clusters match an SMC, from their D_P ``d`` (..., C): first the
-    contingent ones (D_P < ``t_hp``) whose every term was measured, then the contingent
-    ones ``unmeasured`` (bool, same shape: a term the SMC has that this view could not
-    measure, e.g. the brightness of a box seen from right above, its sides out of sight),
-    then the rest; by D_P within each. A grey bar right under the camera otherwise matched
-    a white box's SMC better than the white box (issue 27). The D_P itself is unchanged."""
-    tier = np.where(d < t_hp, np.where(unmeasured, 1.0, 0.0), 2.0)
-    return tier * RANK_TIER + d
-
-
-RANK_TIER = 1e6
-"""Larger than any finite D_P: :func:`ranked` orders by tier, then by D_P."""
 
 
 def match_edges(

@@ -197,6 +197,23 @@ class Match:
     """C_Now: d_p < T_hP (eq. 36)."""
 
 
+def ranked(d: np.ndarray, unmeasured: np.ndarray, t_hp: float) -> np.ndarray:
+    """The order in which clusters match an SMC, from their D_P ``d`` (..., C): first the
+    contingent ones (D_P < ``t_hp``) whose every term was measured, then the contingent
+    ones ``unmeasured`` (bool, same shape: a term the SMC has that this view could not
+    measure, e.g. the brightness of a box seen from right above, its sides out of sight),
+    then the rest; by D_P within each. A grey bar right under the camera otherwise matched
+    a white box's SMC better than the white box (issue 27). The D_P itself is unchanged.
+    Used by :func:`match_context` and the vectorised
+    :func:`smccli.execute.policy.match_edges`."""
+    tier = np.where(d < t_hp, np.where(unmeasured, 1.0, 0.0), 2.0)
+    return tier * RANK_TIER + d
+
+
+RANK_TIER = 1e6
+"""Larger than any finite D_P: :func:`ranked` orders by tier, then by D_P."""
+
+
 def match_context(
     stored: SalientPerceptions, clusters: Sequence[Cluster], weight: float | None, params: SmcParams
 ) -> Match:
@@ -212,19 +229,13 @@ def match_context(
         if not clusters:
             return Match(d_p=INF, cluster_index=None, contingent=False)
         dists = [d_cluster(c, stored.cluster, params.perception) for c in clusters]
-        # Views whose brightness is unknown while the SMC's is not come after the measured
-        # ones (smccli.execute.policy.ranked, which this mirrors).
         unmeasured = [
             params.perception.brightness_scale > 0
             and math.isnan(c.brightness)
             and not math.isnan(stored.cluster.brightness)
             for c in clusters
         ]
-        tiers = [
-            (0 if d < params.t_hp and not u else 1 if d < params.t_hp else 2, d)
-            for d, u in zip(dists, unmeasured, strict=True)
-        ]
-        index = min(range(len(clusters)), key=lambda i: tiers[i])
+        index = int(np.argmin(ranked(np.array(dists), np.array(unmeasured), params.t_hp)))
         total += dists[index]
     if stored.weight is not None:
         if weight is None:
