@@ -10,7 +10,7 @@ Cartesian controller as teleop, holds the goal until the POI arrives, applies th
 event and waits for the fingers to stop, then lets the policy move to the child node, until
 a leaf.
 
-Honesty (DESIGN.md section 2): :class:`TreeExecutor` only sees a
+Honesty (docs/design.md section 2): :class:`TreeExecutor` only sees a
 :class:`~smccli.execute.sensing.Sensors` facade (camera, scale, POI, joints, gripper, step)
 and never imports :mod:`smccli.execute.evaluation`, which scores the episode afterwards from
 the simulator's truth.

@@ -1,6 +1,6 @@
 """What control may use during replay: the robot's sensors and its command input.
 
-Honesty (DESIGN.md section 2): the executor (:mod:`smccli.execute.executor`) sees the
+Honesty (docs/design.md section 2): the executor (:mod:`smccli.execute.executor`) sees the
 simulator only through :class:`Sensors`, which has no ground truth and no object state:
 sensor readings, joint encoders and the scene's nominal model. Object poses are read after
 control by :mod:`smccli.execute.evaluation`. ``tests/test_honesty.py`` audits every access

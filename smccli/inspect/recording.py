@@ -1,4 +1,4 @@
-"""``smc inspect``: a tree and its logs as Rerun recordings (DESIGN.md section 6).
+"""``smc inspect``: a tree and its logs as Rerun recordings (docs/design.md section 6).
 
 One recording per log (a tree alone: one recording), all in application ``smc``; each
 holds the tree (static, :mod:`.tree_view`) and the log on the timeline ``time``

@@ -1,4 +1,4 @@
-"""A mobile robot's SMCs (paper 4.2, DESIGN.md 9): a mobile base's fragments become
+"""A mobile robot's SMCs (paper 4.2, docs/design.md 9): a mobile base's fragments become
 navigation SMCs (the room's colours and the salient lidar scan; the base path as a DMP,
 its goal in the scan's frame); a mobile manipulator's become SMCs of the hand, the base
 or both (two POIs, one duration), the goal in the frame of what the hand goes by."""
@@ -120,7 +120,7 @@ HAND_MOVED = 0.02
 def mobile_manipulator_smcs(
     log: Log, frags: Sequence[Fragment], scene: Scene, params: SmcParams, warnings: list[str]
 ) -> list[Smc]:
-    """The SMCs of a mobile manipulator's fragments (paper 5.3, DESIGN.md 9), by what moved:
+    """The SMCs of a mobile manipulator's fragments (paper 5.3, docs/design.md 9), by what moved:
 
     - the base only (navigation): as a mobile base's, room colours and scan (SI, SL), the
       base path as the DMP (``poi="base"``); the hand rides along;

@@ -89,7 +89,7 @@ class Action:
     poi: str | None = None
     """A mobile manipulator's: the POI ``dmp`` drives, ``"hand"`` (the end effector in the
     world, i.e. odometry's frame) or ``"base"`` (``[x, y, 0, yaw]``); None for a robot with
-    one POI (DESIGN.md 9)."""
+    one POI (docs/design.md 9)."""
     base_dmp: Dmp | None = None
     """A mobile manipulator's base path ``[x, y, 0, yaw]`` over the same fragment when hand
     and base both moved (pulling a door while backing up): two DMPs, one duration."""

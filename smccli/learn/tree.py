@@ -160,7 +160,7 @@ def digest(tree: Tree) -> str:
 
 
 def tree_to_dict(tree: Tree) -> dict[str, Any]:
-    """The JSON document of a tree (outline fixed by DESIGN.md section 4)."""
+    """The JSON document of a tree (outline fixed by docs/design.md section 4)."""
     content = _content(tree)
     return {
         "format": FORMAT,

@@ -1,5 +1,5 @@
 """MCAP logs: topics and codecs (``topics``), crash-safe writing (``writer``), checked reading
-(``reader``). See DESIGN.md section 3 for the layout."""
+(``reader``). See docs/design.md section 3 for the layout."""
 
 from smccli.logs.log import Log, PointCloudMsg, Scan
 from smccli.logs.reader import read_log

@@ -1,4 +1,4 @@
-"""LogWriter: crash-safe MCAP recording of one demonstration (DESIGN.md section 3)."""
+"""LogWriter: crash-safe MCAP recording of one demonstration (docs/design.md section 3)."""
 
 from __future__ import annotations
 

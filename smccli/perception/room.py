@@ -3,7 +3,7 @@ histogram of whole camera frames and its distance.
 
 The histogram is the object clusters' (:mod:`smccli.perception.histogram`): hue x
 saturation with soft bins for coloured pixels, brightness for grey ones. Measured in
-MuJoCo (DESIGN.md section 9): HSV with soft bins moves by 0.005 (-ln BC) for a 0.4 m /
+MuJoCo (docs/design.md section 9): HSV with soft bins moves by 0.005 (-ln BC) for a 0.4 m /
 20 deg jitter where RGB moves by 0.34; a 60 deg turn moves it by 0.12, a panorama of 4
 views by 0.08; differently coloured rooms are > 0.6 apart. A poster must fill >= 5 % of the
 frame to move a whole-frame histogram.

@@ -4,7 +4,7 @@ The value of the perception is the room's outline as the lidar sees it; its loca
 the lidar's pose, from odometry, when the scan was taken. Three things are built on it:
 
 * :func:`align_scans` -- the SE(2) transform between two scans of one room, by ICP from
-  12 yaw seeds (ICP alone converges from about 30 deg / 0.5 m only, DESIGN.md section 9);
+  12 yaw seeds (ICP alone converges from about 30 deg / 0.5 m only, docs/design.md section 9);
 * :func:`scan_distance` -- d_P of two scans (eq. 12), 0 for the same place, >= 1 for
   clearly different places: a trimmed chamfer distance after alignment, over a scale;
 * the transform that carries a base goal stored with the demo scan over to the current
@@ -109,7 +109,7 @@ class ScanParams:
 
     n_seeds: int = 12
     """Yaw seeds, evenly spaced over 2 pi, each with the centroids aligned: ICP from a
-    single guess converges from about 30 deg / 0.5 m only (DESIGN.md section 9)."""
+    single guess converges from about 30 deg / 0.5 m only (docs/design.md section 9)."""
     coarse_distances: tuple[float, ...] = (1.0, 0.3)
     """Correspondence distances of the ICP stages run from every seed [m]: wide first, to
     pull in a seed that is off by a sector, then narrower."""
@@ -144,7 +144,7 @@ class ScanParams:
     """Trimmed chamfer distance that counts as "clearly different" (-> d_P = 1) [m].
 
     T_hP = 0.1 then sits at 3 cm. Measured: the same room from poses up to 0.5 m and any
-    yaw apart gives <= 2.6 cm in MuJoCo (point chamfer, DESIGN.md) and <= 0.9 cm on the
+    yaw apart gives <= 2.6 cm in MuJoCo (point chamfer, docs/design.md) and <= 0.9 cm on the
     synthetic rooms of the tests (outline chamfer, 1 cm range noise; 0.2 cm without);
     another room of a different shape 7-12 cm in MuJoCo (d_P 0.23-0.4) and 16-47 cm in the
     tests (0.52-1.58).
@@ -333,7 +333,7 @@ def scan_distance(a: Scan2D, b: Scan2D, params: ScanParams | None = None) -> flo
 
     Known limitation: a scan sees geometry only. Rooms congruent under a rotation and
     translation, e.g. the mirror image of a room whose own layout is mirror-symmetric
-    (1.0 cm in MuJoCo, DESIGN.md section 9), score as the same place; the mirror image of
+    (1.0 cm in MuJoCo, docs/design.md section 9), score as the same place; the mirror image of
     a room with a lopsided layout scored 5.5-6 cm (0.18-0.20) in the tests: apart, but by
     far less than a room of another shape (>= 0.52). Give each room its own size and
     furniture, or let the room histogram (SI) tell them apart.

@@ -1,6 +1,6 @@
 """A planar 2-D lidar: ``n`` beams in the horizontal plane of a site, cast with ``mj_multiRay``.
 
-DESIGN.md 9: 360 beams cost about 0.12 ms per call, cheap at 10 Hz; one ``mj_multiRay`` per
+docs/design.md 9: 360 beams cost about 0.12 ms per call, cheap at 10 Hz; one ``mj_multiRay`` per
 scan beats 360 rangefinder sensors evaluated on every physics step. The robot's own geoms
 are left out through the geom group mask (``bodyexclude`` excludes one body, not its
 children: an arm link was hit by 339 of 360 beams). Beams follow ``foxglove.LaserScan``:

@@ -60,7 +60,7 @@ class Gripper:
 
 @dataclass(frozen=True, slots=True)
 class Base:
-    """A mobile base: x slide, y slide, yaw hinge (DESIGN.md 9)."""
+    """A mobile base: x slide, y slide, yaw hinge (docs/design.md 9)."""
 
     joints: tuple[str, str, str]
     actuators: tuple[str, str, str]

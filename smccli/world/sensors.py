@@ -27,7 +27,7 @@ class PoiCommand:
     base: np.ndarray | None = None
     """A mobile manipulator's base target ``[x, y, yaw]``, shape (3,) [m, m, rad], in
     odometry's frame; its ``target`` is then the end effector in the base's frame
-    (DESIGN.md 9: two POIs). None: the base holds its last target."""
+    (docs/design.md 9: two POIs). None: the base holds its last target."""
 
 
 @dataclass(frozen=True, slots=True)

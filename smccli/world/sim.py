@@ -77,7 +77,7 @@ class Success:
 
 @dataclass(frozen=True, slots=True)
 class OdometryDrift:
-    """Wheel odometry's error, added on purpose (DESIGN.md 9: odometry = joint readings).
+    """Wheel odometry's error, added on purpose (docs/design.md 9: odometry = joint readings).
 
     Each control period's body-frame motion is integrated with its translation scaled by
     ``1 + scale`` and its heading off by ``yaw_per_metre`` per metre travelled, so the
@@ -122,7 +122,7 @@ class Sim:
         robot = self.robot = scene.robot
         self.mobile_manipulator = robot.base is not None and bool(robot.arm_joints)
         """Base and arm: two POIs, the base's pose (odometry) and the end effector in the
-        base's frame (DESIGN.md 9)."""
+        base's frame (docs/design.md 9)."""
         self.poi_id = self._id(mujoco.mjtObj.mjOBJ_SITE, robot.poi)
         # A mobile manipulator's controller solves in the base's frame: its own copy of the
         # model keeps the base joints at zero, where the base frame is the model's origin.
