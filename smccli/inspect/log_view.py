@@ -31,6 +31,7 @@ from smccli.inspect.labels import (
     HIGHLIGHT,
     PATH_RGB,
     SCAN_RGB,
+    Rgb,
     branch_colours,
     cluster_name,
     cluster_rgb,
@@ -48,7 +49,7 @@ from smccli.inspect.mobile import (
 from smccli.inspect.robot_view import log_robot
 from smccli.inspect.tree_view import cluster_boxes
 from smccli.inspect.views import TIMELINE
-from smccli.learn.tree import Tree
+from smccli.learn.tree import Edge, Tree
 from smccli.perception.colours import colour_name
 
 if TYPE_CHECKING:
@@ -118,66 +119,99 @@ def log_log(
 
     ``mobile``: how to draw a mobile base (default: :func:`mobile_view` of tree and log).
     """
-    import rerun as rr
-
     if mobile is None:
         mobile = mobile_view(tree, log, warn)
-    tcol = rr.TimeColumn
-    # POI: path taken (static), moving point and coordinates over time; a mobile
-    # manipulator's hand in the world (its base's path is drawn by log_base).
-    world = hand_track(log)
-    if len(log.poi_t):
-        radius = 0.004 if mobile is None else 0.015
-        path = rr.LineStrips3D([world[:, :3]], colors=[PATH_RGB], radii=radius)
-        rec.log("/world/poi/path", path, static=True)
-        n = len(log.poi_t)
-        times = [tcol(TIMELINE, duration=log.poi_t)]
-        rec.send_columns(
-            "/world/poi",
-            indexes=times,
-            columns=rr.Points3D.columns(
-                positions=world[:, :3], radii=np.full(n, 0.01), colors=np.tile(HIGHLIGHT, (n, 1))
-            ),
-        )
-        for i, axis in enumerate(("x", "y", "z", "yaw")):
-            rec.send_columns(
-                f"/signals/poi/{axis}",
-                indexes=times,
-                columns=rr.Scalars.columns(scalars=log.poi[:, i]),
-            )
-        if n > 1:
-            dt = np.diff(log.poi_t)
-            step = np.linalg.norm(np.diff(world[:, :3], axis=0), axis=1)
-            speed = step / np.where(dt > 0, dt, np.inf)
-            rec.send_columns(
-                "/signals/poi/speed",
-                indexes=[tcol(TIMELINE, duration=log.poi_t[1:])],
-                columns=rr.Scalars.columns(scalars=speed),
-            )
-    if len(log.weight_t):
-        rec.send_columns(
-            "/signals/weight",
-            indexes=[tcol(TIMELINE, duration=log.weight_t)],
-            columns=rr.Scalars.columns(scalars=log.weight),
-        )
-    if log.commands:
-        ct = np.array([c.t for c in log.commands])
-        rec.send_columns(
-            "/signals/gripper",
-            indexes=[tcol(TIMELINE, duration=ct)],
-            columns=rr.Scalars.columns(scalars=[c.gripper for c in log.commands]),
-        )
+    _log_poi(rec, log, mobile)
+    _log_weight_and_gripper(rec, log)
     _log_camera(rec, log)
     log_robot(rec, log, warn)
     if mobile is not None:
         if len(log.poi_t):
             log_base(rec, log, mobile)
         log_scans(rec, log, mobile)
+    _log_recorded_clouds(rec, log)
+    points = decision_points(log, tree)
+    _log_marks_and_fragments(rec, log, points)
+    _log_decisions(rec, log, tree, warn, mobile)
+    if mobile is not None:
+        _log_room_histograms(rec, log, tree, points)
+    # A mobile manipulator perceives both ways: rooms and scans, and objects.
+    if perception and (mobile is None or len(log.base_t)):
+        _log_perception(rec, log, tree, points, warn)
+
+
+def _log_poi(rec: rr.RecordingStream, log: Log, mobile: MobileView | None) -> None:
+    """The POI: path taken (static), moving point, coordinates and speed over time; a
+    mobile manipulator's hand in the world (its base's path is drawn by log_base)."""
+    import rerun as rr
+
+    if not len(log.poi_t):
+        return
+    world = hand_track(log)
+    radius = 0.004 if mobile is None else 0.015
+    path = rr.LineStrips3D([world[:, :3]], colors=[PATH_RGB], radii=radius)
+    rec.log("/world/poi/path", path, static=True)
+    n = len(log.poi_t)
+    times = [rr.TimeColumn(TIMELINE, duration=log.poi_t)]
+    rec.send_columns(
+        "/world/poi",
+        indexes=times,
+        columns=rr.Points3D.columns(
+            positions=world[:, :3], radii=np.full(n, 0.01), colors=np.tile(HIGHLIGHT, (n, 1))
+        ),
+    )
+    for i, axis in enumerate(("x", "y", "z", "yaw")):
+        rec.send_columns(
+            f"/signals/poi/{axis}",
+            indexes=times,
+            columns=rr.Scalars.columns(scalars=log.poi[:, i]),
+        )
+    if n > 1:
+        dt = np.diff(log.poi_t)
+        step = np.linalg.norm(np.diff(world[:, :3], axis=0), axis=1)
+        speed = step / np.where(dt > 0, dt, np.inf)
+        rec.send_columns(
+            "/signals/poi/speed",
+            indexes=[rr.TimeColumn(TIMELINE, duration=log.poi_t[1:])],
+            columns=rr.Scalars.columns(scalars=speed),
+        )
+
+
+def _log_weight_and_gripper(rec: rr.RecordingStream, log: Log) -> None:
+    """The scale's weight and the commanded gripper as scalars over time."""
+    import rerun as rr
+
+    if len(log.weight_t):
+        rec.send_columns(
+            "/signals/weight",
+            indexes=[rr.TimeColumn(TIMELINE, duration=log.weight_t)],
+            columns=rr.Scalars.columns(scalars=log.weight),
+        )
+    if log.commands:
+        ct = np.array([c.t for c in log.commands])
+        rec.send_columns(
+            "/signals/gripper",
+            indexes=[rr.TimeColumn(TIMELINE, duration=ct)],
+            columns=rr.Scalars.columns(scalars=[c.gripper for c in log.commands]),
+        )
+
+
+def _log_recorded_clouds(rec: rr.RecordingStream, log: Log) -> None:
+    """The point clouds the log recorded, subsampled (:data:`MAX_CLOUD_POINTS`)."""
+    import rerun as rr
+
     for pc in log.point_clouds:
         rec.set_time(TIMELINE, duration=pc.t)
         pts, cols = _subsample(np.asarray(pc.points), pc.colors)
         rec.log("/world/perception/points", rr.Points3D(pts, colors=cols, radii=0.002))
-    # Events: one TextLog per saliency mark, per fragment, per decision.
+
+
+def _log_marks_and_fragments(
+    rec: rr.RecordingStream, log: Log, points: Sequence[tuple[float, float, str]]
+) -> None:
+    """One TextLog per saliency mark and, for a demonstration, per fragment."""
+    import rerun as rr
+
     for m in log.marks:
         rec.set_time(TIMELINE, duration=m.t)
         rec.log(
@@ -186,17 +220,10 @@ def log_log(
                 f"saliency mark ({m.source}) {m.label}".strip(), level="INFO", color=HIGHLIGHT
             ),
         )
-    points = decision_points(log, tree)
     if not log.decisions:
         for t0, t1, label in points:
             rec.set_time(TIMELINE, duration=t0)
             rec.log("/events/fragments", rr.TextLog(f"{label}: {t0:.2f}-{t1:.2f} s", level="DEBUG"))
-    _log_decisions(rec, log, tree, warn, mobile)
-    if mobile is not None:
-        _log_room_histograms(rec, log, tree, points)
-    # A mobile manipulator perceives both ways: rooms and scans, and objects.
-    if perception and (mobile is None or len(log.base_t)):
-        _log_perception(rec, log, tree, points, warn)
 
 
 def _subsample(
@@ -254,30 +281,13 @@ def _log_decisions(
     mapped goal (a base's also as an arrow, with the lidar's pose) and planned path."""
     import rerun as rr
 
-    from smccli.learn.dmp import rollout
-
     edges = {e.id: e for e in tree.edges}
     colours = branch_colours(tree)
     name = Path(log.path).name
     for d in log.decisions:
         t = float(d["t"])
         rec.set_time(TIMELINE, duration=t)
-        cands = d.get("candidates") or []
-        parts = []
-        for c in cands:
-            dp = c.get("d_p")
-            raw = c.get("terms") or {}
-            order = [k for k in _TERMS if k in raw] + sorted(k for k in raw if k not in _TERMS)
-            terms = {k: raw[k] for k in order if raw[k] is not None}
-            parts.append(
-                f"{c.get('edge')} d_p={'-' if dp is None else f'{dp:.3f}'}"
-                + (f" ({', '.join(f'{k} {v:.3f}' for k, v in terms.items())})" if terms else "")
-                + f"{' contingent' if c.get('contingent') else ''}"
-            )
-            if dp is not None:
-                rec.log(f"/signals/decision/d_p/{c.get('edge')}", rr.Scalars(float(dp)))
-            for k, v in terms.items():
-                rec.log(f"/signals/decision/{k}/{c.get('edge')}", rr.Scalars(float(v)))
+        parts = _log_candidates(rec, d.get("candidates") or [])
         chosen = d.get("chosen")
         text = f"node {d.get('node')}: chose {chosen if chosen is not None else 'none'} | " + (
             "; ".join(parts) or "no candidates"
@@ -301,37 +311,90 @@ def _log_decisions(
             continue
         colour = colours.get(str(chosen), HIGHLIGHT)
         goal = np.asarray(goal, dtype=float)
-        point = rr.Points3D(
-            [goal[:3]],
-            colors=[colour],
-            radii=0.012 if mobile is None else 0.04,
-            labels=[f"goal of {chosen}"],
-        )
-        if mobile is not None and len(goal) == 4:
-            arrow = rr.Arrows3D(**pose_arrows(goal[[0, 1, 3]], 0.02), colors=[colour], radii=0.03)
-            rec.log("/world/decisions/goal", point, arrow)
-        else:
-            rec.log("/world/decisions/goal", point)
+        _log_goal(rec, goal, str(chosen), colour, mobile)
         edge = edges.get(str(chosen))
-        start = _poi_at(log, t)
-        if edge is not None and edge.smc.action.poi == "base" and len(log.base_t):
-            bt, base = base_track(log)  # a mobile manipulator's drive starts at its base
-            start = base[int(np.argmin(np.abs(bt - t)))]
         if edge is None:
             warn(f"{name}: decision at t={t:.2f} s chose {chosen}, not an edge of this tree")
             continue
-        if start is None or goal.shape != edge.smc.action.dmp.start.shape:
-            continue
-        _, y = rollout(
-            edge.smc.action.dmp,
-            start=start,
-            goal=goal,
-            duration=float(d.get("duration") or edge.smc.action.dmp.duration),
+        duration = float(d.get("duration") or edge.smc.action.dmp.duration)
+        _log_planned(rec, log, edge, t, goal, duration, colour, mobile)
+
+
+def _log_candidates(rec: rr.RecordingStream, candidates: Sequence[dict]) -> list[str]:
+    """Each candidate's D_P and (a base's) D_P terms as scalars; returns their words
+    (``e3 d_p=0.012 (room 0.010, scan 0.002) contingent``) for the decision's TextLog."""
+    import rerun as rr
+
+    parts = []
+    for c in candidates:
+        dp = c.get("d_p")
+        raw = c.get("terms") or {}
+        order = [k for k in _TERMS if k in raw] + sorted(k for k in raw if k not in _TERMS)
+        terms = {k: raw[k] for k in order if raw[k] is not None}
+        parts.append(
+            f"{c.get('edge')} d_p={'-' if dp is None else f'{dp:.3f}'}"
+            + (f" ({', '.join(f'{k} {v:.3f}' for k, v in terms.items())})" if terms else "")
+            + f"{' contingent' if c.get('contingent') else ''}"
         )
-        radius = 0.006 if mobile is None else 0.02
-        label = f"{chosen} planned"
-        planned = rr.LineStrips3D([y[:, :3]], colors=[colour], radii=radius, labels=[label])
-        rec.log("/world/decisions/planned", planned)
+        if dp is not None:
+            rec.log(f"/signals/decision/d_p/{c.get('edge')}", rr.Scalars(float(dp)))
+        for k, v in terms.items():
+            rec.log(f"/signals/decision/{k}/{c.get('edge')}", rr.Scalars(float(v)))
+    return parts
+
+
+def _log_goal(
+    rec: rr.RecordingStream,
+    goal: np.ndarray,
+    chosen: str,
+    colour: Rgb,
+    mobile: MobileView | None,
+) -> None:
+    """The chosen SMC's mapped goal as a point (a base's ``[x, y, z, yaw]`` also as an
+    arrow)."""
+    import rerun as rr
+
+    point = rr.Points3D(
+        [goal[:3]],
+        colors=[colour],
+        radii=0.012 if mobile is None else 0.04,
+        labels=[f"goal of {chosen}"],
+    )
+    if mobile is not None and len(goal) == 4:
+        arrow = rr.Arrows3D(**pose_arrows(goal[[0, 1, 3]], 0.02), colors=[colour], radii=0.03)
+        rec.log("/world/decisions/goal", point, arrow)
+    else:
+        rec.log("/world/decisions/goal", point)
+
+
+def _log_planned(
+    rec: rr.RecordingStream,
+    log: Log,
+    edge: Edge,
+    t: float,
+    goal: np.ndarray,
+    duration: float,
+    colour: Rgb,
+    mobile: MobileView | None,
+) -> None:
+    """The path ``edge``'s DMP plans from the POI at ``t`` (a mobile manipulator's drive:
+    from its base) to the mapped ``goal``; nothing when the start is unknown or the goal's
+    shape is not the DMP's."""
+    import rerun as rr
+
+    from smccli.learn.dmp import rollout
+
+    start = _poi_at(log, t)
+    if edge.smc.action.poi == "base" and len(log.base_t):
+        bt, base = base_track(log)  # a mobile manipulator's drive starts at its base
+        start = base[int(np.argmin(np.abs(bt - t)))]
+    if start is None or goal.shape != edge.smc.action.dmp.start.shape:
+        return
+    _, y = rollout(edge.smc.action.dmp, start=start, goal=goal, duration=duration)
+    radius = 0.006 if mobile is None else 0.02
+    label = f"{edge.id} planned"
+    planned = rr.LineStrips3D([y[:, :3]], colors=[colour], radii=radius, labels=[label])
+    rec.log("/world/decisions/planned", planned)
 
 
 def _log_perception(

@@ -130,40 +130,19 @@ def serve_recordings(
     two addresses once everything is sent; on Ctrl-C the viewer process (and its group) is
     stopped.
     """
-    import rerun as rr
-
-    for flag, p in (("--port", port), ("--grpc-port", grpc_port)):
-        if p is None:
-            continue
-        if not 0 < p < 65536:
-            raise SmcError(f"{flag} {p}: expected 1-65535")
-        if _port_taken(p):
-            raise SmcError(f"{flag} {p}: 127.0.0.1:{p} is already in use")
-    if grpc_port == port:
-        raise SmcError(f"--grpc-port {grpc_port}: the same as --port")
-    grpc = grpc_port if grpc_port is not None else free_port()
+    grpc = _grpc_port(port, grpc_port)
+    data = f"rerun+http://127.0.0.1:{grpc}/proxy"
     addresses = Addresses(
-        viewer=f"http://127.0.0.1:{port}/?url="
-        + urllib.parse.quote(f"rerun+http://127.0.0.1:{grpc}/proxy", safe=""),
-        data=f"rerun+http://127.0.0.1:{grpc}/proxy",
+        viewer=f"http://127.0.0.1:{port}/?url=" + urllib.parse.quote(data, safe=""),
+        data=data,
     )
-    cmd = [
-        rerun_binary(),
-        "--serve-web",
-        "--bind",
-        "127.0.0.1",
-        "--port",
-        str(grpc),
-        "--web-viewer-port",
-        str(port),
-    ]
     # Ctrl-C must reach us: a shell's `cmd &` may start us with SIGINT ignored.
     old = signal.signal(signal.SIGINT, signal.default_int_handler)
     with tempfile.TemporaryDirectory(prefix="smc-serve-") as tmp:
         log_path = Path(tmp) / "viewer.log"
         with open(log_path, "wb") as viewer_log:
             proc = subprocess.Popen(
-                cmd,
+                _viewer_command(port, grpc),
                 stdin=subprocess.DEVNULL,
                 stdout=viewer_log,
                 stderr=subprocess.STDOUT,
@@ -171,14 +150,7 @@ def serve_recordings(
             )
             try:
                 _wait_ready(proc, log_path, port, grpc, ready_timeout)
-                bp = blueprint_for(tree, logs)
-                for rid, log in reversed(recording_plan(tree, logs, tree_name)):
-                    rec = rr.RecordingStream(APP_ID, recording_id=rid)
-                    rec.connect_grpc(addresses.data, default_blueprint=bp)
-                    rec.send_recording_name(rid)
-                    fill(rec, tree, log, warn)
-                    rec.flush()
-                    rec.disconnect()
+                _send_recordings(tree, logs, addresses.data, tree_name, warn)
                 if on_message is not None:
                     on_message(f"viewer: {addresses.viewer}")
                     on_message(f"data:   {addresses.data}")
@@ -197,6 +169,55 @@ def serve_recordings(
                 _stop(proc)
                 signal.signal(signal.SIGINT, old)
     return addresses
+
+
+def _grpc_port(port: int, grpc_port: int | None) -> int:
+    """The data port: ``grpc_port``, or a free one if None. Raises SmcError for a port out
+    of range, already in use, or the same as ``port``."""
+    for flag, p in (("--port", port), ("--grpc-port", grpc_port)):
+        if p is None:
+            continue
+        if not 0 < p < 65536:
+            raise SmcError(f"{flag} {p}: expected 1-65535")
+        if _port_taken(p):
+            raise SmcError(f"{flag} {p}: 127.0.0.1:{p} is already in use")
+    if grpc_port == port:
+        raise SmcError(f"--grpc-port {grpc_port}: the same as --port")
+    return grpc_port if grpc_port is not None else free_port()
+
+
+def _viewer_command(port: int, grpc: int) -> list[str]:
+    """The ``rerun`` command serving the web viewer on ``port`` and its data on ``grpc``."""
+    return [
+        rerun_binary(),
+        "--serve-web",
+        "--bind",
+        "127.0.0.1",
+        "--port",
+        str(grpc),
+        "--web-viewer-port",
+        str(port),
+    ]
+
+
+def _send_recordings(
+    tree: Tree,
+    logs: Sequence[Log],
+    data: str,
+    tree_name: str,
+    warn: Callable[[str], None],
+) -> None:
+    """Send each recording to the gRPC proxy at ``data``, the first log's last."""
+    import rerun as rr
+
+    bp = blueprint_for(tree, logs)
+    for rid, log in reversed(recording_plan(tree, logs, tree_name)):
+        rec = rr.RecordingStream(APP_ID, recording_id=rid)
+        rec.connect_grpc(data, default_blueprint=bp)
+        rec.send_recording_name(rid)
+        fill(rec, tree, log, warn)
+        rec.flush()
+        rec.disconnect()
 
 
 def _wait_ready(
