@@ -23,8 +23,7 @@ if TYPE_CHECKING:
     import rerun.blueprint as rrb
 
 CHAR_W = 7.0
-"""Width of one label character in graph-view units (Rerun's label font at zoom 1,
-measured on a screenshot of the web viewer)."""
+"""Width of one label character in graph-view units (Rerun's label font at zoom 1)."""
 LINE_H = 17.0
 """Height of one label line in graph-view units."""
 NODE_W = 80.0

@@ -35,31 +35,28 @@ X              discard: delete the log
 =============  ===========================================
 
 Holding a key. MuJoCo 4.0's passive viewer calls ``key_callback`` with the key code for a
-press only: its GLFW adapter drops GLFW's repeat and release events (measured under Xvfb:
-holding Up for 1.5 s gives one call, while GLFW itself sees auto-repeat every 40 ms after
-0.66 s). So the callback cannot tell a held key from a tap, and an "each press or repeat
-renews a short hold" scheme would stop after its first window.
-The base mode reads GLFW's own key state of the viewer's window instead (``glfwGetKey``,
-the same GLFW library the viewer runs on) every tick. The window is GLFW's current context
-on the viewer's thread, taken in the first key callback; it is read under the viewer's
-lock, which that thread holds while it polls events, so the window is alive and its key
-table is not being written. A key counts as down for a tick if GLFW says so or if it was
-pressed since the last tick (a tap shorter than a tick still moves one tick). GLFW releases
-every key when the window loses focus, so a key never sticks down. If the window cannot be
-had (another platform or MuJoCo version), each press drives for :data:`HOLD_S` instead.
+press only: its GLFW adapter drops GLFW's repeat and release events, so the callback cannot
+tell a held key from a tap. The base mode reads GLFW's own key state of the viewer's window
+instead (``glfwGetKey``, the same GLFW library the viewer runs on) every tick. The window is
+GLFW's current context on the viewer's thread, taken in the first key callback; it is read
+under the viewer's lock, which that thread holds while it polls events, so the window is
+alive and its key table is not being written. A key counts as down for a tick if GLFW says
+so or if it was pressed since the last tick (a tap shorter than a tick still moves one
+tick). GLFW releases every key when the window loses focus, so a key never sticks down. If
+the window cannot be had (another platform or MuJoCo version), each press drives for
+:data:`HOLD_S` instead.
 
 Driving. The keys down give a body-frame twist; each tick it is rotated by the measured
 heading and integrated into the world pose target ``[x, y, 0, yaw]`` sent as the POI
-command. The base's position servos follow with a lag that grows with speed (about 9 cm at
-0.4 m/s, 0.08 rad at 0.8 rad/s); on release the target stays put and the base settles onto
-it, which is how far it coasts (from 0.4 m/s: under 5 cm/s after 0.46 s, stopped within
-about 1 s, like a base braking at 0.9 m/s²). Shift halves the speeds rather than doubling
-them: the base saturates at 1 m/s and 1.5 rad/s (force caps against joint damping,
-``robots/base/robot.xml``), so twice 0.8 rad/s could not be followed. The target may lead
-the measured pose by at most :data:`MAX_LEAD_M` and :data:`MAX_LEAD_RAD`, so a base held
-against a wall (its servos are force limited) does not wind up a target it would later run
-to; once nothing is held and the base has stalled short of its target (blocked), the target
-drops back to the measured pose, so it stops pushing. The viewer's camera tracks the base.
+command. The base's position servos follow with a lag that grows with speed; on release the
+target stays put and the base settles onto it, which is how far it coasts (about 1 s from
+full speed). Shift halves the speeds rather than doubling them: the base saturates at 1 m/s
+and 1.5 rad/s (force caps against joint damping, ``robots/base/robot.xml``), so twice 0.8
+rad/s could not be followed. The target may lead the measured pose by at most
+:data:`MAX_LEAD_M` and :data:`MAX_LEAD_RAD`, so a base held against a wall (its servos are
+force limited) does not wind up a target it would later run to; once nothing is held and the
+base has stalled short of its target (blocked), the target drops back to the measured pose,
+so it stops pushing. The viewer's camera tracks the base.
 
 The viewer's own shortcuts. MuJoCo's viewer takes every letter key for itself (render and
 visualisation toggles), even with its panels hidden, which is why the base drives with the
@@ -249,6 +246,27 @@ def held_from_presses(pressed_at: dict[int, float], t: float) -> set[int]:
     return {k for k, t0 in pressed_at.items() if t - t0 < HOLD_S}
 
 
+def _open_viewer(sim: Sim, on_key: Callable[[int], None]) -> Any:
+    """MuJoCo's passive viewer on ``sim``, its panels hidden, ``on_key`` its key callback.
+    Raises SmcError (naming the fix) when there is no display."""
+    import mujoco.viewer
+
+    try:
+        return mujoco.viewer.launch_passive(
+            sim.model,
+            sim.data,
+            key_callback=on_key,
+            show_left_ui=False,
+            show_right_ui=False,
+        )
+    except Exception as exc:  # no display, no GL context
+        raise SmcError(
+            f"keyboard operator: cannot open the MuJoCo viewer ({exc}); it "
+            "needs a display (set DISPLAY, or run under xvfb-run with "
+            "MUJOCO_GL=glfw)"
+        ) from None
+
+
 class KeyboardOperator:
     """Reads queued key presses each control tick and turns them into POI commands."""
 
@@ -259,8 +277,6 @@ class KeyboardOperator:
         realtime: bool = True,
         on_ready: Callable[[str], None] | None = None,
     ) -> None:
-        import mujoco.viewer
-
         self.sim = sim
         self.keys: queue.Queue[int] = queue.Queue()
         self.target = sim.poi().copy()
@@ -274,9 +290,9 @@ class KeyboardOperator:
         self.marks = 0
         """Saliency marks so far in this episode (shown in the HUD)."""
         self.episode: tuple[int, int] | None = None
+        """(this episode, episodes in the session), 1-based, shown in the HUD."""
         self.last_task: str | None = None
         """The HUD's verdict on the previous demonstration (set by the session)."""
-        """(this episode, episodes in the session), 1-based, shown in the HUD."""
         self._placed: tuple[np.ndarray, np.ndarray] | None = None  # the marker's last pose
         self.mobile_manipulator = sim.mobile_manipulator
         """Base and arm: Tab switches what the keys move (:attr:`mode`)."""
@@ -296,44 +312,41 @@ class KeyboardOperator:
         self._pressed_at: dict[int, float] = {}
         self._t0_wall: float | None = None  # real time starts at the first tick
         self._t0_sim = sim.t
-        try:
-            self.viewer = mujoco.viewer.launch_passive(
-                sim.model,
-                sim.data,
-                key_callback=self._on_key,
-                show_left_ui=False,
-                show_right_ui=False,
-            )
-        except Exception as exc:  # no display, no GL context
-            raise SmcError(
-                f"keyboard operator: cannot open the MuJoCo viewer ({exc}); it "
-                "needs a display (set DISPLAY, or run under xvfb-run with "
-                "MUJOCO_GL=glfw)"
-            ) from None
-        # MuJoCo's viewer shows geom groups 0-2; the robot's own geoms sit in their group.
+        self.viewer = _open_viewer(sim, self._on_key)
         with self.viewer.lock():
-            self.viewer.opt.geomgroup[sim.robot.geom_group] = 1
-            self.viewer.opt.geomgroup[HIDDEN_GROUP] = 1
-            # Visualisation flags the viewer toggles on letters this operator uses (and, for
-            # a base, on A and D: W/A/S/D come to hand, and D would hide the walls).
-            keys = (*DRIVE, *EVENTS, ord("A"), ord("D"), *BINDINGS) if self.base else BINDINGS
-            letters = {chr(k) for k in keys if ord("A") <= k <= ord("Z")}
-            self._flags = {
-                i: int(self.viewer.opt.flags[i])
-                for i, (_, _, key) in enumerate(mujoco.mjVISSTRING)
-                if key in letters
-            }
-            if self.base:
-                pose = self._base_pose() if self.mobile_manipulator else sim.poi()
-                cam = self.viewer.cam
-                cam.type = mujoco.mjtCamera.mjCAMERA_TRACKING
-                cam.trackbodyid = (
-                    int(sim.model.body_rootid[sim.model.site_bodyid[sim.poi_id]])
-                    if self.mobile_manipulator
-                    else int(sim.model.site_bodyid[sim.poi_id])
-                )
-                # From above and behind: over the walls (2 m high), facing the base's +x.
-                cam.distance, cam.elevation, cam.azimuth = 4.0, -70.0, float(np.degrees(pose[3]))
+            self._flags = self._set_up_view()
+
+    def _set_up_view(self) -> dict[int, int]:
+        """Show the robot's and the hidden geom groups; for a base, track it with the camera.
+        Returns the visualisation flags the operator's letters toggle, as they are now
+        (:meth:`tick` puts them back). Called under the viewer's lock."""
+        import mujoco
+
+        sim, opt = self.sim, self.viewer.opt
+        # MuJoCo's viewer shows geom groups 0-2; the robot's own geoms sit in their group.
+        opt.geomgroup[sim.robot.geom_group] = 1
+        opt.geomgroup[HIDDEN_GROUP] = 1
+        # Visualisation flags the viewer toggles on letters this operator uses (and, for
+        # a base, on A and D: W/A/S/D come to hand, and D would hide the walls).
+        keys = (*DRIVE, *EVENTS, ord("A"), ord("D"), *BINDINGS) if self.base else BINDINGS
+        letters = {chr(k) for k in keys if ord("A") <= k <= ord("Z")}
+        flags = {
+            i: int(opt.flags[i])
+            for i, (_, _, key) in enumerate(mujoco.mjVISSTRING)
+            if key in letters
+        }
+        if self.base:
+            pose = self._base_pose() if self.mobile_manipulator else sim.poi()
+            cam = self.viewer.cam
+            cam.type = mujoco.mjtCamera.mjCAMERA_TRACKING
+            cam.trackbodyid = (
+                int(sim.model.body_rootid[sim.model.site_bodyid[sim.poi_id]])
+                if self.mobile_manipulator
+                else int(sim.model.site_bodyid[sim.poi_id])
+            )
+            # From above and behind: over the walls (2 m high), facing the base's +x.
+            cam.distance, cam.elevation, cam.azimuth = 4.0, -70.0, float(np.degrees(pose[3]))
+        return flags
 
     def _base_pose(self) -> np.ndarray:
         """A mobile manipulator's base pose ``[x, y, 0, yaw]`` from odometry."""
