@@ -232,7 +232,8 @@ class Sim:
         # Objects the layout leaves out (another variant's) leave the world.
         self._park([o for o in self.scene.objects if o.name not in layout])
         self.present = tuple(n for n in layout)
-        """Names of the objects the layout placed (evaluation only)."""
+        """Names of the objects the layout placed (for evaluation and the operator, who see
+        the world)."""
         if self.controller is not None:
             home = self.robot.home_array()
             d.qpos[self._arm_q] = home
