@@ -1,11 +1,13 @@
 """The honesty rule, audited while it runs: during control, the robot sees the simulator only
-through its sensors and its joint encoders (DESIGN.md section 2).
+through its sensors and its joint encoders (docs/design.md section 2).
 
 One episode per kind of robot (an arm, a mobile base, a mobile manipulator) runs on a
 simulator that records every attribute read on it, with the module that read it. Control
 (the executor, the policy, perception, what compile learnt) must read nothing; the sensing
-facade only the sensor readings listed here; evaluation reads the truth after control ends.
-And no object control holds, at any depth, is the simulator, its model or its data.
+facade only the sensor readings listed here; the episode's harness only its setup and the
+clock. The truth (:mod:`smccli.world.truth`) is out of control's reach by an import rule
+(``tests/test_layout.py``). And no object control holds, at any depth, is the simulator,
+its model or its data.
 """
 
 from __future__ import annotations
@@ -51,9 +53,13 @@ SENSOR_READINGS = {
 }
 """What :class:`smccli.execute.sensing.Sensors` may read on the simulator."""
 HARNESS = {"smccli.execute.episode", "smccli.execute.evaluation"}
-"""The episode's own loop and evaluation: its watch beside control (what a base touches,
-whether a handle slips from the hand) and scoring once control is over. No control module
-imports either (``tests/test_layout.py``), so what they read cannot reach control."""
+"""The episode's own loop and evaluation's watch beside control (what a base touches,
+whether a handle slips from the hand)."""
+HARNESS_READS = {"scene", "drift", "reset", "start_camera", "control_period", "t"}
+"""What the harness reads on the simulator itself while control runs: its setup and the
+clock. The truth it watches goes through :class:`smccli.world.truth.Truth` (reads of the
+simulator's own package, not audited here), which no control module imports, directly or
+not (``tests/test_layout.py``)."""
 
 
 class AuditedSim(Sim):
@@ -74,14 +80,10 @@ class AuditedSim(Sim):
 
 
 def _violations(reads: list[tuple[str, str]]) -> set[tuple[str, str]]:
-    """The reads that break the rule: by the facade beyond the sensor readings, or by any
-    module but the facade and the harness."""
-    return {
-        (module, name)
-        for module, name in reads
-        if module not in HARNESS
-        and (module != "smccli.execute.sensing" or name not in SENSOR_READINGS)
-    }
+    """The reads that break the rule: by the facade beyond the sensor readings, by the
+    harness beyond its setup and clock, or by any other module."""
+    allowed = {"smccli.execute.sensing": SENSOR_READINGS} | dict.fromkeys(HARNESS, HARNESS_READS)
+    return {(module, name) for module, name in reads if name not in allowed.get(module, ())}
 
 
 def _holds(root: Any, targets: dict[int, str], skip: set[tuple[int, str]]) -> list[str]:

@@ -99,6 +99,40 @@ def test_control_never_imports_the_simulator_or_the_evaluation() -> None:
     assert not bad, bad
 
 
+def _module_path(name: str) -> Path | None:
+    """The file of smccli module ``name`` (a package: its ``__init__.py``), None if not one."""
+    parts = name.split(".")
+    if parts[0] != "smccli":
+        return None
+    base = PACKAGE.joinpath(*parts[1:])
+    for path in (base.with_suffix(".py"), base / "__init__.py"):
+        if path.is_file():
+            return path
+    return None
+
+
+def test_control_never_imports_the_truth() -> None:
+    """The honesty rule as an import rule: what only evaluation and the episode harness may
+    read of the simulator (``smccli.world.truth``: object poses, the success criterion,
+    the disturbances) is out of control's reach, directly or through any module it imports
+    when it runs."""
+    bad = []
+    for path in CONTROL:
+        seen: set[Path] = set()
+        todo = [(path, str(path.relative_to(PACKAGE)))]
+        while todo:
+            here, chain = todo.pop()
+            if here in seen:
+                continue
+            seen.add(here)
+            for m in _runtime_imports(here):
+                if m == "smccli.world.truth" or m.startswith("smccli.world.truth."):
+                    bad.append(f"{chain} imports {m}")
+                elif (dep := _module_path(m)) is not None:
+                    todo.append((dep, f"{chain} -> {dep.relative_to(PACKAGE)}"))
+    assert not bad, bad
+
+
 VOCABULARY = {"world", "hand", "poi", "lidar", "gripper"}
 """Words that are smc's own concepts (goal frames, robot-file keys) and happen to name a
 part of a built-in robot too."""

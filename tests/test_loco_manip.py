@@ -32,6 +32,7 @@ from smccli.record.operators import load_script, run_script, script_layout  # no
 from smccli.world.layout import sample_layout  # noqa: E402
 from smccli.world.scene import builtin_names, load_scene  # noqa: E402
 from smccli.world.sim import Sim  # noqa: E402
+from smccli.world.truth import Truth  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 SAMPLES = REPO / "sample_logs" / "loco_manip"
@@ -70,7 +71,7 @@ def test_demonstration_script_does_the_task(scene, variant):
     sim.settle(1.0)
     assert d.qpos[slide] > 0.8, "the sliding door is open"
     assert math.degrees(d.qpos[hinge]) > 80, "the wardrobe is open"
-    assert sim.success(), sim.success().reason
+    assert Truth(sim).success(), Truth(sim).success().reason
     sim.close()
 
 
@@ -240,7 +241,7 @@ def test_the_wardrobe_moves_between_two_decisions(tree, scene):
         policy.advance(plan)
     sim.settle(1.0)
     assert moved
-    assert sim.success(), sim.success().reason
+    assert Truth(sim).success(), Truth(sim).success().reason
     sim.close()
 
 
@@ -276,7 +277,7 @@ def test_a_handle_torn_from_the_hand_is_reported_as_slipped(tree, scene):
     yanked = []
 
     def on_step(cmd) -> None:
-        watch.watch(sim, cmd)
+        watch.watch(Truth(sim), cmd)
         if not yanked and watch.holding("sliding_door") and sim.t > 0:
             sim.data.qpos[door] += 0.25
             mujoco.mj_forward(sim.model, sim.data)

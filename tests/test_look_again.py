@@ -11,7 +11,8 @@ import pytest  # noqa: E402
 
 from smccli.execute.episode import episode, layout_for, resolve  # noqa: E402
 from smccli.execute.executor import steer  # noqa: E402
-from smccli.world.sim import Push, Sim  # noqa: E402
+from smccli.world.sim import Sim  # noqa: E402
+from smccli.world.truth import Push, Truth  # noqa: E402
 
 
 def test_steer_keeps_what_was_streamed_stays_smooth_and_ends_on_the_new_goal():
@@ -34,11 +35,12 @@ def test_push_object_moves_it_on_the_table(sample_trees):
     layout = layout_for(scene, 0)
     sim = Sim(scene, layout)
     try:
-        before = sim.object_pose("white_box")
-        sim.push_object("white_box", 0.05, -0.02)
-        np.testing.assert_allclose(sim.object_pose("white_box")[:2], before[:2] + [0.05, -0.02])
+        truth = Truth(sim)
+        before = truth.object_pose("white_box")
+        truth.push_object("white_box", 0.05, -0.02)
+        np.testing.assert_allclose(truth.object_pose("white_box")[:2], before[:2] + [0.05, -0.02])
         with pytest.raises(ValueError, match="no_such_box"):
-            sim.push_object("no_such_box", 0.01, 0.0)
+            truth.push_object("no_such_box", 0.01, 0.0)
     finally:
         sim.close()
 

@@ -22,6 +22,7 @@ from smccli.record.operators import (
 from smccli.schemas import load_schema
 from smccli.world.scene import load_scene
 from smccli.world.sim import Sim
+from smccli.world.truth import Truth
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = sorted((ROOT / "sample_logs").glob("*/*.yaml"))
@@ -58,7 +59,7 @@ def test_sample_script_succeeds(path: Path) -> None:
     marks = []
     for out in run_script(script, sim, seed=0):
         for mark in out.marks:
-            marks.append((mark, sim.poi().copy(), sim.gripper_opening(), sim.ground_truth()))
+            marks.append((mark, sim.poi().copy(), sim.gripper_opening(), Truth(sim).ground_truth()))
     assert [m[0].label for m in marks] == EXPECTED_MARKS[path.stem]
     assert marks[0][0].source == "operator" and marks[0][2] < 0.9  # closed on the object
     for mark, poi, _, truth in marks:
@@ -66,7 +67,7 @@ def test_sample_script_succeeds(path: Path) -> None:
         nearest = min(np.linalg.norm(poi[:3] - p[:3]) for p in truth.values())
         assert nearest < 0.06, mark.label
     sim.settle(1.0)
-    result = sim.success()
+    result = Truth(sim).success()
     assert result, result.reason
 
 
@@ -140,7 +141,9 @@ steps:
     for _ in run_script(script, sim):
         moving = moving or sim.poi()[2] > 0.1 and sim.gripper_opening() < 0.9
         if moving:
-            offsets.append(np.linalg.norm(sim.ground_truth()["heavy_box"][:3] - sim.poi()[:3]))
+            offsets.append(
+                np.linalg.norm(Truth(sim).ground_truth()["heavy_box"][:3] - sim.poi()[:3])
+            )
     assert offsets and max(offsets) < 0.01  # 0.5 kg box stays between the fingers
 
 

@@ -24,6 +24,7 @@ from smccli.world.robot_model import RobotModel  # noqa: E402
 from smccli.world.scene import Scene, load_scene  # noqa: E402
 from smccli.world.sensors import PoiCommand  # noqa: E402
 from smccli.world.sim import Sim  # noqa: E402
+from smccli.world.truth import Truth  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -126,7 +127,7 @@ def run_policy(tree: Tree, scene: Scene, layout: dict) -> tuple[list[Plan], bool
             assert len(plans) < 10
         robot.sim.settle(FINAL_SETTLE)
         # Evaluation, after control: the scene's success criterion from the simulator's truth.
-        success = bool(robot.sim.success())
+        success = bool(Truth(robot.sim).success())
         final = robot.observe()
     finally:
         robot.sim.close()

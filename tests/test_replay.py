@@ -27,6 +27,7 @@ from smccli.execute.executor import EdgeStack, equivalent, match_edges  # noqa: 
 from smccli.learn.contingency import match_context  # noqa: E402
 from smccli.logs import read_log, strip_topic  # noqa: E402
 from smccli.world.sim import Sim  # noqa: E402
+from smccli.world.truth import Truth  # noqa: E402
 
 PY = str(REPO / ".venv" / "bin" / "python")
 
@@ -154,7 +155,7 @@ def test_control_never_reads_object_state(bench, monkeypatch):
         raise AssertionError("object state read during control")
 
     for name in ("ground_truth", "object_pose", "object_speed", "holds", "success"):
-        monkeypatch.setattr(Sim, name, forbidden)
+        monkeypatch.setattr(Truth, name, forbidden)
     honest = episode(tree, scene, layout, evaluate=lambda sim: monkeypatch.undo())
     assert honest.outcome == reference.outcome == "success"
     assert decisions_of(honest) == decisions_of(reference)

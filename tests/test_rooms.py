@@ -23,6 +23,7 @@ from smccli.record.operators import load_script, parse_script, run_script, scrip
 from smccli.world.layout import nominal_layout, sample_layout
 from smccli.world.scene import ROBOT_KEY, SCENES_DIR, load_scene, load_scene_from_text
 from smccli.world.sim import OdometryDrift, Sim
+from smccli.world.truth import Truth
 
 DEMOS = sorted((SAMPLE_LOGS / "rooms").glob("demo*.mcap"))
 
@@ -49,10 +50,10 @@ def test_demo_scripts_reach_their_goal_without_touching_anything(scene, name: st
     touched: set[str] = set()
     marks = []
     for out in run_script(script, sim):
-        touched.update(sim.robot_contacts())
+        touched.update(Truth(sim).robot_contacts())
         marks += [m.label for m in out.marks]
     assert marks == ["at_doorway", "read_poster", "done"]
-    assert sim.success(), sim.success().reason
+    assert Truth(sim).success(), Truth(sim).success().reason
     assert not touched
 
 
@@ -136,7 +137,7 @@ def test_odometry_drift_is_cancelled_by_the_scans(tree_path: Path, scene) -> Non
         off = []
 
         def drifted(sim: Sim, off: list[float] = off) -> None:  # after control: odometry's error
-            odom, truth = sim.poi(), sim.base_pose()
+            odom, truth = sim.poi(), Truth(sim).base_pose()
             off.append(math.dist(odom[:2], truth[:2]))
 
         layout = layout_for(scene, seed=0, trial=trial)
@@ -192,7 +193,7 @@ def test_contacts_name_what_the_base_hit(scene) -> None:
 
     for _ in range(200):  # push into the desk south of it
         sim.step(PoiCommand(sim.t, np.array([2.2, -1.2, 0.0, 0.0]), 1.0))
-    assert "room1_desk" in sim.robot_contacts()
+    assert "room1_desk" in Truth(sim).robot_contacts()
 
 
 # --- scene and script files ----------------------------------------------------------------
@@ -271,7 +272,7 @@ def test_starts_inside_a_wall_are_drawn_again(tmp_path):
     for i in range(40):
         lay = sample_layout(scene, np.random.default_rng([0, i]))
         sim.reset(lay)
-        assert sim.robot_contacts() == [], (lay["robot"], sim.robot_contacts())
+        assert Truth(sim).robot_contacts() == [], (lay["robot"], Truth(sim).robot_contacts())
 
 
 def test_a_start_range_inside_a_wall_is_refused_in_one_line(tmp_path, tree_path):

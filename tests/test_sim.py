@@ -1,4 +1,5 @@
-"""Sim: stepping, sensors (camera depth, scale), robot geometry, ground truth, success."""
+"""Sim: stepping, sensors (camera depth, scale), robot geometry; its truth (ground truth,
+success) through :class:`smccli.world.truth.Truth`."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from smccli.world.layout import nominal_layout
 from smccli.world.scene import load_scene
 from smccli.world.sensors import PoiCommand
 from smccli.world.sim import HIDDEN_GROUP, Sim
+from smccli.world.truth import Truth
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +62,7 @@ def test_depth_of_an_object_is_where_it_is(pick_sim: Sim) -> None:
     assert frame.depth.shape == (h, w) and frame.depth.dtype == np.float32
     T_camera_world = np.linalg.inv(frame.T_world_camera)
     for name, (r, g, b) in [("orange_cube", (255, 115, 13)), ("green_cylinder", (26, 178, 51))]:
-        pose = pick_sim.ground_truth()[name]
+        pose = Truth(pick_sim).ground_truth()[name]
         top = pose[:3] + [0, 0, pick_sim.scene.object(name).size[2] / 2]
         p = T_camera_world @ np.append(top, 1.0)
         u, v, _ = frame.K @ (p[:3] / p[2])
@@ -107,11 +109,11 @@ def test_robot_geometry_covers_the_hand(pick_sim: Sim) -> None:
 
 
 def test_ground_truth_and_success(pick_sim: Sim) -> None:
-    gt = pick_sim.ground_truth()
+    gt = Truth(pick_sim).ground_truth()
     assert set(gt) == {o.name for o in pick_sim.scene.objects}
     for pose in gt.values():
         assert pose.shape == (7,) and np.linalg.norm(pose[3:]) == pytest.approx(1.0)
-    result = pick_sim.success()
+    result = Truth(pick_sim).success()
     assert not result and "not resting on" in result.reason
 
 
@@ -122,22 +124,22 @@ def test_success_when_placed_by_hand() -> None:
     layout["orange_cube"] = (gx + 0.01, gy, gz + 0.04 + 0.026, 0.0)
     sim = Sim(scene, layout)
     sim.settle(1.0)
-    assert sim.success() and sim.success("cube_on_green")
-    assert not sim.success("pyramid_on_yellow")
+    assert Truth(sim).success() and Truth(sim).success("cube_on_green")
+    assert not Truth(sim).success("pyramid_on_yellow")
 
 
-def _placed(scene_name: str, name: str, pose: tuple, variant: str | None = None) -> Sim:
+def _placed(scene_name: str, name: str, pose: tuple, variant: str | None = None) -> Truth:
     scene = load_scene(scene_name)
     layout = nominal_layout(scene, variant)
     layout[name] = pose
     sim = Sim(scene, layout)
     sim.settle(2.0)
-    return sim
+    return Truth(sim)
 
 
 def test_success_is_strict_about_the_footprint_rest_and_support() -> None:
-    """Strict success (issue 14): a box leaning over the container's wall, its centre
-    inside (the old centre-only check passed it), fails; so does one still moving; a cube
+    """Strict success: a box leaning over the container's wall, its centre inside,
+    fails; so does one still moving; a cube
     that slid off the cylinder onto the table fails and says what it touches."""
     ox, oy, _, _ = load_scene("bench_pick").object("orange_box").pose
     inside = _placed("bench_pick", "white_box", (ox, oy, 0.031, 0.0))
@@ -147,7 +149,7 @@ def test_success_is_strict_about_the_footprint_rest_and_support() -> None:
     assert abs(centre[1]) < 0.08 - 0.01 - 0.02  # the centre is well inside the inner walls
     assert not leaning.success() and "not resting inside" in leaning.success().reason
     moving = _placed("bench_pick", "white_box", (ox, oy, 0.031, 0.0))
-    moving.data.qvel[moving._free_qadr["white_box"][1] + 5] = 1.0  # spinning about z
+    moving.data.qvel[moving.sim.free_joints["white_box"][1] + 5] = 1.0  # spinning about z
     assert not moving.success() and "moving" in moving.success().reason
     g = load_scene("pick_place").object("green_cylinder").pose
     off = _placed("pick_place", "orange_cube", (g[0] + 0.045, g[1], 0.106, 0.3), "cube_green")

@@ -1,4 +1,4 @@
-"""Success as data (issue 26): a task's criterion combines conditions with ``all_of``,
+"""Success as data: a task's criterion combines conditions with ``all_of``,
 ``any_of`` and ``none_of``, nested; every condition's result is reported; a two-object task
 scored with ``all_of`` gives nothing to a tree that does only its first half."""
 
@@ -16,6 +16,7 @@ from smccli.learn.compile import compile_logs
 from smccli.record.session import RecordConfig, record
 from smccli.world.scene import SCENES_DIR, Group, load_scene
 from smccli.world.sim import Sim
+from smccli.world.truth import Truth
 
 CUBE = {"object": "orange_cube", "relation": "on_top_of", "target": "green_cylinder"}
 PYRAMID = {"object": "grey_pyramid", "relation": "on_top_of", "target": "yellow_cylinder"}
@@ -90,7 +91,7 @@ def test_all_of_needs_every_condition_and_reports_each(tmp_path: Path) -> None:
     sim = Sim(scene)
     try:
         _put(sim, scene, {"orange_cube": "green_cylinder"})
-        half = sim.success()
+        half = Truth(sim).success()
         assert not half
         assert [(task, held) for task, _, held in half.criteria] == [
             ("both", True),
@@ -98,7 +99,7 @@ def test_all_of_needs_every_condition_and_reports_each(tmp_path: Path) -> None:
         ]
         assert "grey_pyramid" in half.reason and "orange_cube" not in half.reason
         _put(sim, scene, {"orange_cube": "green_cylinder", "grey_pyramid": "yellow_cylinder"})
-        whole = sim.success()
+        whole = Truth(sim).success()
         assert whole and [held for _, _, held in whole.criteria] == [True, True]
         assert "orange_cube" in whole.reason and "grey_pyramid" in whole.reason
     finally:
@@ -111,7 +112,7 @@ def test_any_of_keeps_its_meaning(tmp_path: Path) -> None:
     sim = Sim(scene)
     try:
         _put(sim, scene, {"orange_cube": "green_cylinder"})
-        assert sim.success()
+        assert Truth(sim).success()
     finally:
         sim.close()
 
@@ -160,7 +161,7 @@ def _tree(folder: Path, scene: Path, parts: list[str]) -> Path:
 
 @pytest.mark.slow
 def test_all_of_gives_nothing_to_half_a_task(tmp_path: Path) -> None:
-    """Done when (issue 26): 0 % for a tree that does only the first half of a two-object
+    """0 % for a tree that does only the first half of a two-object
     task scored with all_of, >= 95 % for the whole one, 40 trials each."""
     from smccli.execute.episode import resolve
 
@@ -258,7 +259,7 @@ def test_what_a_check_reports_is_plain_json(name: str) -> None:
     sim = Sim(scene)
     try:
         sim.reset()
-        result = sim.success()
+        result = Truth(sim).success()
         assert result.criteria and all(type(held) is bool for _, _, held in result.criteria)
         json.dumps([list(c) for c in result.criteria])
     finally:

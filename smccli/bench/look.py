@@ -9,7 +9,7 @@ the white box pushed 5 cm in a direction drawn uniformly, at a time drawn unifor
 - *late*: 1.4-1.8 s in (the hand over the box, its fingers hiding it);
 
 with looking again (the executor's ``LOOK_PERIOD``) and without (0). The push is the
-world's (:meth:`~smccli.world.sim.Sim.push_object`): control learns of it only through the
+world's (:meth:`~smccli.world.truth.Truth.push_object`): control learns of it only through the
 camera. Wilson 95 % intervals. Writes ``docs/bench_look.json`` (``--out``).
 """
 
@@ -32,7 +32,8 @@ from smccli.bench.paper import VARIANT_DIR, demo_tree, noisy_demo_tree  # noqa: 
 from smccli.execute.campaign import wilson  # noqa: E402
 from smccli.execute.episode import episode, layout_for, resolve  # noqa: E402
 from smccli.execute.executor import LOOK_PERIOD  # noqa: E402
-from smccli.world.sim import Push, Sim  # noqa: E402
+from smccli.world.sim import Sim  # noqa: E402
+from smccli.world.truth import Push  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 PUSH = 0.05

@@ -48,7 +48,8 @@ from smccli.world.scene import (
     sensor_identity,
 )
 from smccli.world.sensors import PoiCommand
-from smccli.world.sim import OdometryDrift, Push, Sim
+from smccli.world.sim import OdometryDrift, Sim
+from smccli.world.truth import Push, Truth
 
 FINAL_SETTLE = 1.0
 """Sim time the scene settles at a leaf before scoring [s]."""
@@ -254,6 +255,53 @@ def demo_duration(path: Sequence[Edge]) -> float:
     return float(sum(np.mean([s.t1 - s.t0 for s in e.sources]) for e in path if e.sources))
 
 
+@dataclass(frozen=True, slots=True)
+class _Control:
+    """What control did in an episode, before evaluation."""
+
+    outcome: str
+    reason: str
+    decisions: list[Decision]
+    actions: list[ActionTrace]
+    path: list[Edge]
+    duration: float
+    """Sim time of the task [s] (:attr:`EpisodeResult.duration`)."""
+    taught: Teaching | None
+
+
+class _Harness:
+    """The episode's own hand and eyes beside control, once per control period: the
+    disturbance (``push``), evaluation's watch (what a mobile base touches, a handle that
+    leaves the closed hand) and the replay log. It reads the truth; control never sees it."""
+
+    def __init__(self, sim: Sim, scene: Scene, push: Push | None) -> None:
+        self.sim, self.scene, self.push = sim, scene, push
+        self.truth = Truth(sim)
+        self.touched: set[str] = set()
+        """What a mobile base touched (the floor aside)."""
+        self.slips = HandleWatch(scene.doors)
+        self.log: ReplayLog | None = None
+        self._pushed = False
+
+    def on_step(self, cmd: PoiCommand) -> None:
+        """One control period: ``cmd`` was sent and the simulator stepped."""
+        push = self.push
+        if push is not None and not self._pushed and self.sim.t >= push.at:
+            self.truth.push_object(push.object, push.dx, push.dy)  # the world, not control
+            self._pushed = True
+        if self.scene.robot.base is not None:
+            self.touched.update(self.truth.robot_contacts())
+        if self.scene.doors:
+            self.slips.watch(self.truth, cmd)
+        if self.log is not None:
+            self.log.on_step(cmd)
+
+    def close_log(self) -> None:
+        if self.log is not None:
+            self.log.close()
+            self.log = None
+
+
 def episode(
     tree: Tree,
     scene: Scene,
@@ -290,62 +338,14 @@ def episode(
         if sim.scene is not scene or sim.drift != drift:
             raise ValueError("episode: the simulator given runs another scene or drift")
         sim.reset(layout)
-    log = None
-    touched: set[str] = set()
-    slips = HandleWatch(scene.doors)
+    harness = _Harness(sim, scene, push)
     try:
         if output is not None:
-            log = ReplayLog(Path(output), scene, sim, tree, seed, layout, force)
-
-        pushed: list[float] = []
-
-        def on_step(cmd: PoiCommand) -> None:
-            if push is not None and not pushed and sim.t >= push.at:
-                sim.push_object(push.object, push.dx, push.dy)  # the world, not control
-                pushed.append(sim.t)
-            # Evaluation's watch, beside control: what a mobile base touches (sim truth),
-            # and a handle that leaves the closed hand (slips).
-            if scene.robot.base is not None:
-                touched.update(sim.robot_contacts())
-            if scene.doors:
-                slips.watch(sim, cmd)
-            if log is not None:
-                log.on_step(cmd)
-
-        sensors = Sensors(sim, on_step=on_step)
-        sim.start_camera()  # the camera is running before the task starts (GL warm-up)
-        executor = TreeExecutor(
-            tree,
-            sensors,
-            on_decision=None if log is None else log.on_decision,
-            speed=speed,
-            look_period=look_period,
-        )
-        t0 = sim.t
-        outcome, reason, decisions, actions, path = executor.run()
-        taught = None
-        if teach is not None and outcome == "no_contingent_smc":
-            if log is not None:
-                log.close()
-                log = None
-            taught = run_teaching(sim, tree, executor.policy.nodes[0], teach, seed)
-            executor = TreeExecutor(
-                load_tree(teach.tree_path), sensors, speed=speed, look_period=look_period
-            )
-            outcome, reason, more_d, more_a, more_p = executor.run(start=taught.end)
-            decisions, actions, path = decisions + more_d, actions + more_a, path + more_p
-        # The task ends with its last action: the retreat after a last release
-        # (executor.RETREAT) is clearing away, as the demonstration's after its last mark.
-        duration = (actions[-1].t1 if outcome == "success" and actions else sim.t) - t0
-        if outcome == "success":
-            for _ in range(round(FINAL_SETTLE / sim.control_period)):
-                executor.hold()
-        if log is not None:
-            log.close()
-            log = None
+            harness.log = ReplayLog(Path(output), scene, sim, tree, seed, layout, force)
+        run = _control(tree, sim, harness, teach, seed, speed, look_period)
     except BaseException:
-        if log is not None:
-            log.abort()
+        if harness.log is not None:
+            harness.log.abort()
         raise
     finally:
         if own:
@@ -357,30 +357,74 @@ def episode(
         sim,
         scene,
         layout,
-        outcome=outcome,
-        reason=reason,
-        actions=actions,
-        collisions=sorted(touched),
-        slips=slips.slipped,
+        outcome=run.outcome,
+        reason=run.reason,
+        actions=run.actions,
+        collisions=sorted(harness.touched),
+        slips=harness.slips.slipped,
     )
     return EpisodeResult(
         outcome=verdict.outcome,
         success=verdict.success,
         reason=verdict.reason,
-        decisions=tuple(decisions),
-        actions=tuple(actions),
-        path=tuple(e.id for e in path),
+        decisions=tuple(run.decisions),
+        actions=tuple(run.actions),
+        path=tuple(e.id for e in run.path),
         layout=layout,
-        duration=duration,
-        demo_duration=demo_duration(path),
+        duration=run.duration,
+        demo_duration=demo_duration(run.path),
         wall_time=time.perf_counter() - wall0,
         manipulated=verdict.manipulated,
         final_poses=verdict.final_poses,
         criteria=verdict.criteria,
         output=None if output is None else Path(output),
-        taught=taught,
+        taught=run.taught,
         speed=speed,
     )
+
+
+def _control(
+    tree: Tree,
+    sim: Sim,
+    harness: _Harness,
+    teach: TeachConfig | None,
+    seed: int,
+    speed: float,
+    look_period: float,
+) -> _Control:
+    """Algorithm 2 through the robot's sensors until a leaf or a stop; with ``teach``, an
+    operator continues where no SMC is contingent and execution goes on after the taught
+    chain. At a leaf reached with success, the scene settles (:data:`FINAL_SETTLE`). The
+    replay log is closed when control ends (before teaching, if an operator takes over)."""
+    log = harness.log
+    sensors = Sensors(sim, on_step=harness.on_step)
+    sim.start_camera()  # the camera is running before the task starts (GL warm-up)
+    executor = TreeExecutor(
+        tree,
+        sensors,
+        on_decision=None if log is None else log.on_decision,
+        speed=speed,
+        look_period=look_period,
+    )
+    t0 = sim.t
+    outcome, reason, decisions, actions, path = executor.run()
+    taught = None
+    if teach is not None and outcome == "no_contingent_smc":
+        harness.close_log()
+        taught = run_teaching(sim, tree, executor.policy.nodes[0], teach, seed)
+        executor = TreeExecutor(
+            load_tree(teach.tree_path), sensors, speed=speed, look_period=look_period
+        )
+        outcome, reason, more_d, more_a, more_p = executor.run(start=taught.end)
+        decisions, actions, path = decisions + more_d, actions + more_a, path + more_p
+    # The task ends with its last action: the retreat after a last release
+    # (executor.RETREAT) is clearing away, as the demonstration's after its last mark.
+    duration = (actions[-1].t1 if outcome == "success" and actions else sim.t) - t0
+    if outcome == "success":
+        for _ in range(round(FINAL_SETTLE / sim.control_period)):
+            executor.hold()
+    harness.close_log()
+    return _Control(outcome, reason, decisions, actions, path, duration, taught)
 
 
 def run_episode(

@@ -1,8 +1,9 @@
 """Scoring a replay episode once control is over: the outcome and why it failed.
 
-The only replay module that reads the simulator's truth (object poses, the scene's success
-criterion); the executor (:mod:`smccli.execute.executor`) and the sensors it sees
-(:mod:`smccli.execute.sensing`) never import it, so control cannot read ground truth.
+It reads the simulator's truth (object poses, the scene's success criterion) through
+:class:`smccli.world.truth.Truth`; the executor (:mod:`smccli.execute.executor`) and the
+sensors it sees (:mod:`smccli.execute.sensing`) import neither (``tests/test_layout.py``),
+so control cannot read ground truth.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from smccli.execute.executor import CONTROL_OUTCOMES, ActionTrace
 from smccli.world.scene import ROBOT_KEY, DoorSpec, Layout, Scene
 from smccli.world.sensors import PoiCommand
 from smccli.world.sim import Sim
+from smccli.world.truth import Truth
 
 OUTCOMES = (
     *CONTROL_OUTCOMES,
@@ -54,11 +56,11 @@ class HandleWatch:
         """Both fingers hold ``door``'s handle (or lost it less than SLIP_TIME ago)."""
         return self._holding[door]
 
-    def watch(self, sim: Sim, cmd: PoiCommand) -> None:
-        """One control period: ``cmd`` was sent, ``sim`` stepped."""
+    def watch(self, truth: Truth, cmd: PoiCommand) -> None:
+        """One control period: ``cmd`` was sent, the simulator of ``truth`` stepped."""
         closed = cmd.gripper < 0.5
         for d in self.doors:
-            on = sim.fingers_on(d.handle)
+            on = truth.fingers_on(d.handle)
             if not closed:  # let go on purpose
                 self._holding[d.name], self._held[d.name] = False, None
             elif on >= 2:
@@ -66,8 +68,8 @@ class HandleWatch:
             elif self._holding[d.name]:
                 since = self._held[d.name]
                 if since is None:
-                    self._held[d.name] = sim.t
-                elif sim.t - since >= SLIP_TIME:
+                    self._held[d.name] = truth.sim.t
+                elif truth.sim.t - since >= SLIP_TIME:
                     self.slipped.append(f"{d.name} at t={since:.1f} s")
                     self._holding[d.name], self._held[d.name] = False, None
 
@@ -114,15 +116,16 @@ def score(
     closed hand (``slips``, :class:`HandleWatch`), else ``door_not_opened`` when a leaf
     was reached with a door shut; a slip comes first (it explains a later stop), a shut
     door before the object's cause (a control stop and a collision say more)."""
-    final = {o.name: [float(v) for v in sim.object_pose(o.name)] for o in scene.objects}
+    truth = Truth(sim)
+    final = {o.name: [float(v) for v in truth.object_pose(o.name)] for o in scene.objects}
     if scene.robot.base is not None:
-        x, y, yaw = sim.base_pose()
+        x, y, yaw = truth.base_pose()
         final[ROBOT_KEY] = [float(x), float(y), 0.0, float(yaw)]
     obj = manipulated_object(scene, layout, final)
     ok = False
     criteria: tuple[tuple[str, str, bool], ...] = ()
     if outcome == "success":
-        criterion = sim.success()
+        criterion = truth.success()
         criteria = criterion.criteria
         ok = bool(criterion)
         reason = criterion.reason
@@ -130,14 +133,14 @@ def score(
             ok, outcome = False, "collision"
             reason = f"the base touched {', '.join(sorted(set(collisions)))}; {reason}"
         elif not ok and scene.robot.base is not None and not scene.robot.arm_joints:
-            outcome = classify_base_failure(scene, sim, final[ROBOT_KEY])
+            outcome = classify_base_failure(scene, truth, final[ROBOT_KEY])
         elif not ok:
-            outcome = incomplete_task(scene, sim, layout, final) or classify_failure(
+            outcome = incomplete_task(scene, truth, layout, final) or classify_failure(
                 scene, layout, final, actions, obj
             )
     if not ok and scene.doors:
         # The first cause: a slipped handle leaves its door shut and the base runs into it.
-        closed = [d.name for d in scene.doors if sim.door_opening(d.joint) < d.open]
+        closed = [d.name for d in scene.doors if truth.door_opening(d.joint) < d.open]
         if slips:
             outcome, reason = "handle_slipped", f"handle slipped: {'; '.join(slips)}; {reason}"
         elif closed and outcome not in ("collision", *CONTROL_OUTCOMES[1:]):
@@ -159,13 +162,13 @@ def manipulated_object(scene: Scene, layout: Layout, final: dict[str, list[float
     return best[2] if best[0] > 0.02 else names[0]
 
 
-def classify_base_failure(scene: Scene, sim: Sim, final: Sequence[float]) -> str:
+def classify_base_failure(scene: Scene, truth: Truth, final: Sequence[float]) -> str:
     """Why a mobile base that reached a leaf missed its goal: ``wrong_room`` when it ended
     in another region (room) than the goal place of the task on show, else ``goal_missed``."""
     goals = [
         scene.place(c.target)
         for crit in scene.success
-        if crit.variant is None or sim.shows(crit.variant)
+        if crit.variant is None or truth.shows(crit.variant)
         for c in crit.conditions()
         if c.relation == "at"
     ]
@@ -176,17 +179,17 @@ def classify_base_failure(scene: Scene, sim: Sim, final: Sequence[float]) -> str
 
 
 def incomplete_task(
-    scene: Scene, sim: Sim, layout: Layout, final: dict[str, list[float]]
+    scene: Scene, truth: Truth, layout: Layout, final: dict[str, list[float]]
 ) -> str | None:
     """``task_incomplete`` when the tree reached its leaf with part of the task done: some
     of a criterion's conditions hold and the objects of those that do not never moved
     (under 2 cm), i.e. the tree was taught less than the task (half of a two-object task
     scored with ``all_of``), not an action that went wrong; else None."""
     for crit in scene.success:
-        if crit.variant is not None and not sim.shows(crit.variant):
+        if crit.variant is not None and not truth.shows(crit.variant):
             continue
         conds = [c for c in crit.conditions() if c.relation != "at" and c.object in layout]
-        held = [bool(sim.holds(c)[0]) for c in conds]
+        held = [bool(truth.holds(c)[0]) for c in conds]
         left = [c.object for c, h in zip(conds, held, strict=True) if not h]
         if (
             any(held)

@@ -22,6 +22,7 @@ from smccli.perception.cloud import object_points
 from smccli.world.scene import Layout, Scene
 from smccli.world.sensors import CameraFrame, PoiCommand
 from smccli.world.sim import Sim
+from smccli.world.truth import Truth
 
 
 class ReplayLog:
@@ -47,6 +48,8 @@ class ReplayLog:
             path, metadata=meta, attachments=scene_attachments(scene), force=force
         )
         self.sim = sim
+        self.truth = Truth(sim)
+        """For the evaluation topic alone."""
         self.scene = scene
         self.params = tree.params
         self.cam_period = 1.0 / scene.camera.rate
@@ -62,7 +65,8 @@ class ReplayLog:
             w.write_lidar(sim)  # on the camera's clock, as when recording
             self.next_cam += self.cam_period
         if t >= self.next_gt - 1e-9:
-            w.write_ground_truth(t, sim.ground_truth())  # evaluation topic, not read by control
+            # The evaluation topic: no control module reads it.
+            w.write_ground_truth(t, self.truth.ground_truth())
             self.next_gt += self.gt_period
         w.write_joint_state(sim.joint_state())
         w.write_robot_pose(sim)

@@ -28,6 +28,7 @@ from smccli.world.layout import nominal_layout, sample_layout
 from smccli.world.scene import ROBOT_KEY, Layout, Scene, load_scene
 from smccli.world.sensors import PoiCommand, SaliencyMark
 from smccli.world.sim import Sim
+from smccli.world.truth import Truth
 
 TREMOR_TIME_CONSTANT = 0.15
 """Correlation time of the tremor noise [s]."""
@@ -253,6 +254,7 @@ class ScriptOperator:
                 f"{script.source}: written for scene {script.scene!r}, "
                 f"but the simulation runs {sim.scene.name!r}"
             )
+        truth = Truth(sim)  # a person sees where things are
         names = [o.name for o in sim.scene.objects if o.name in sim.present]
         places = [n for n, _ in sim.scene.places]
         for step in script.steps:
@@ -273,7 +275,7 @@ class ScriptOperator:
             if (
                 step.object is not None
                 and step.object not in names
-                and not (sim.mobile_manipulator and sim.has_body(step.object))
+                and not (sim.mobile_manipulator and truth.has_body(step.object))
             ):
                 raise ScriptError(
                     f"{step.where(script.source)}: no object {step.object!r} in scene "
@@ -281,6 +283,7 @@ class ScriptOperator:
                 )
         self.script = script
         self.sim = sim
+        self.truth = truth
         self.rng = np.random.default_rng(seed)
         self._i = 0
         self._active: _Active | None = None
@@ -424,7 +427,7 @@ class ScriptOperator:
             x, y, yaw = self.sim.scene.place(step.place)
             return np.array([x, y, 0.0, yaw])
         if step.object is not None:
-            x, y, z, oyaw = self.sim.object_pose(step.object)
+            x, y, z, oyaw = self.truth.object_pose(step.object)
             c, s = math.cos(oyaw), math.sin(oyaw)
             dx, dy, dz = step.offset
             goal = np.array(

@@ -28,10 +28,11 @@ from smccli.outputs import check_output
 from smccli.world.layout import nominal_layout, sample_layout
 from smccli.world.scene import Layout, Scene, load_scene
 from smccli.world.sim import Sim
+from smccli.world.truth import Truth
 
 if TYPE_CHECKING:
     from smccli.record.keyboard import KeyboardOperator
-    from smccli.record.operators import ScriptOperator
+    from smccli.record.operators import Script, ScriptOperator
 
 MAX_DURATION = 600.0
 """A recording longer than this [s of sim time] is stopped as a runaway script."""
@@ -165,28 +166,7 @@ def record_episodes(
     outs = [check_output(p, force=cfg.force) for p in episode_paths(cfg.output, cfg.episodes)]
     scene = load_scene(cfg.scene)
     extra: dict[str, str] = {}
-    script = None
-    if cfg.operator == "script":
-        from smccli.record.operators import ScriptOperator, load_script, script_layout
-
-        if cfg.script is None:
-            raise ScriptError("--operator script needs --script FILE")
-        script = load_script(cfg.script)
-        extra["script"] = Path(cfg.script).name
-
-        def layout_of(seed: int) -> Layout:
-            return script_layout(scene, script, _rng(seed) if cfg.randomize else None)
-
-    elif cfg.operator == "keyboard":
-        first = scene.variants[0][0] if scene.variants else None
-
-        def layout_of(seed: int) -> Layout:
-            if cfg.randomize:
-                return sample_layout(scene, _rng(seed))
-            return nominal_layout(scene, first)
-
-    else:
-        raise ScriptError(f"unknown operator {cfg.operator!r} (valid: script, keyboard)")
+    script, layout_of = _layouts(cfg, scene, extra)
     say = on_message or (lambda msg: None)
     sim = Sim(scene, layout_of(cfg.seed), target_marker=cfg.operator == "keyboard")
     keyboard: KeyboardOperator | None = None
@@ -198,48 +178,14 @@ def record_episodes(
             keyboard = KeyboardOperator(sim, on_ready=say)
         i = 0
         while i < cfg.episodes:
-            seed = cfg.seed + i
-            layout = layout_of(seed)
-            sim.reset(layout)
-            if keyboard is not None:
-                keyboard.reset((i + 1, cfg.episodes) if cfg.episodes > 1 else None)
-                operator: ScriptOperator | KeyboardOperator = keyboard
-            else:
-                assert script is not None
-                operator = ScriptOperator(script, sim, seed=seed)
-            ep = replace(cfg, seed=seed)
-            ep_extra = {
-                **extra,
-                **({"episode": f"{i + 1}/{cfg.episodes}"} if cfg.episodes > 1 else {}),
-                # Where the objects started (reports only: a campaign's distance bands).
-                "layout": json.dumps({k: [float(x) for x in v] for k, v in layout.items()}),
-            }
-            wall0 = time.perf_counter()
-            try:
-                marks, interrupted = record_session(sim, operator, ep, outs[i], ep_extra, on_status)
-            except ScriptError:
-                if keyboard is None or not keyboard.discarded:
-                    raise
-                if cfg.episodes == 1:
-                    raise
-                say(f"episode {i + 1}/{cfg.episodes} discarded; recording it again")
-                continue
-            summary = _summary(outs[i], sim.t, time.perf_counter() - wall0, marks, interrupted)
-            summaries.append(summary)
-            verdict = task_line(summary.task)
-            if keyboard is not None:
-                keyboard.last_task = verdict
-            last = i + 1 == cfg.episodes
-            ended = interrupted is not None or (
-                keyboard is not None and (keyboard.stopped or not keyboard.window_open)
+            layout = layout_of(cfg.seed + i)
+            summary = _record_episode(
+                sim, i, layout, cfg, outs[i], extra, script, keyboard, on_status, say
             )
-            if cfg.episodes > 1:
-                left = "session ended" if ended or last else f"next: episode {i + 2}/{cfg.episodes}"
-                say(
-                    f"episode {i + 1}/{cfg.episodes} kept: {outs[i]} ({sim.t:.1f} s, "
-                    f"{marks} mark(s){'; ' + verdict if verdict else ''}); {left}"
-                )
-            if ended:
+            if summary is None:  # discarded: record it again
+                continue
+            summaries.append(summary)
+            if _episode_kept(summary, i, cfg, keyboard, say):
                 break
             i += 1
     finally:
@@ -249,6 +195,104 @@ def record_episodes(
         if keyboard is not None:
             keyboard.close()
     return summaries
+
+
+def _layouts(
+    cfg: RecordConfig, scene: Scene, extra: dict[str, str]
+) -> tuple[Script | None, Callable[[int], Layout]]:
+    """The operator's script (None for the keyboard) and the layout of each episode's seed;
+    the script's name goes into ``extra`` (the log's metadata)."""
+    if cfg.operator == "script":
+        from smccli.record.operators import load_script, script_layout
+
+        if cfg.script is None:
+            raise ScriptError("--operator script needs --script FILE")
+        script = load_script(cfg.script)
+        extra["script"] = Path(cfg.script).name
+
+        def scripted(seed: int) -> Layout:
+            return script_layout(scene, script, _rng(seed) if cfg.randomize else None)
+
+        return script, scripted
+    if cfg.operator == "keyboard":
+        first = scene.variants[0][0] if scene.variants else None
+
+        def by_hand(seed: int) -> Layout:
+            if cfg.randomize:
+                return sample_layout(scene, _rng(seed))
+            return nominal_layout(scene, first)
+
+        return None, by_hand
+    raise ScriptError(f"unknown operator {cfg.operator!r} (valid: script, keyboard)")
+
+
+def _record_episode(
+    sim: Sim,
+    i: int,
+    layout: Layout,
+    cfg: RecordConfig,
+    out: Path,
+    extra: dict[str, str],
+    script: Script | None,
+    keyboard: KeyboardOperator | None,
+    on_status: Callable[[RecordStatus], None] | None,
+    say: Callable[[str], None],
+) -> RecordSummary | None:
+    """Episode ``i`` of the session from ``layout`` into ``out``; None when the person
+    discarded it (it is then recorded again)."""
+    from smccli.record.operators import ScriptOperator
+
+    seed = cfg.seed + i
+    sim.reset(layout)
+    if keyboard is not None:
+        keyboard.reset((i + 1, cfg.episodes) if cfg.episodes > 1 else None)
+        operator: ScriptOperator | KeyboardOperator = keyboard
+    else:
+        assert script is not None
+        operator = ScriptOperator(script, sim, seed=seed)
+    ep = replace(cfg, seed=seed)
+    ep_extra = {
+        **extra,
+        **({"episode": f"{i + 1}/{cfg.episodes}"} if cfg.episodes > 1 else {}),
+        # Where the objects started (reports only: a campaign's distance bands).
+        "layout": json.dumps({k: [float(x) for x in v] for k, v in layout.items()}),
+    }
+    wall0 = time.perf_counter()
+    try:
+        marks, interrupted = record_session(sim, operator, ep, out, ep_extra, on_status)
+    except ScriptError:
+        if keyboard is None or not keyboard.discarded:
+            raise
+        if cfg.episodes == 1:
+            raise
+        say(f"episode {i + 1}/{cfg.episodes} discarded; recording it again")
+        return None
+    return _summary(out, sim.t, time.perf_counter() - wall0, marks, interrupted)
+
+
+def _episode_kept(
+    summary: RecordSummary,
+    i: int,
+    cfg: RecordConfig,
+    keyboard: KeyboardOperator | None,
+    say: Callable[[str], None],
+) -> bool:
+    """Tell the person episode ``i`` was kept (and its task's verdict); whether the
+    session ends with it."""
+    verdict = task_line(summary.task)
+    if keyboard is not None:
+        keyboard.last_task = verdict
+    last = i + 1 == cfg.episodes
+    ended = summary.interrupted is not None or (
+        keyboard is not None and (keyboard.stopped or not keyboard.window_open)
+    )
+    if cfg.episodes > 1:
+        left = "session ended" if ended or last else f"next: episode {i + 2}/{cfg.episodes}"
+        say(
+            f"episode {i + 1}/{cfg.episodes} kept: {summary.path} ({summary.duration:.1f} s, "
+            f"{summary.fragments} mark(s){'; ' + verdict if verdict else ''}); {left}"
+        )
+    return ended
 
 
 def _summary(
@@ -328,7 +372,7 @@ def task_outcome(sim: Sim) -> str:
         return json.dumps({"success": None, "reason": "the scene defines no task"})
     try:
         sim.settle(TASK_SETTLE)
-        s = sim.success()
+        s = Truth(sim).success()
     except Exception as exc:  # the check must never cost the recording its end record
         return json.dumps({"success": None, "reason": f"not checked: {exc}"})
     criteria = [list(c) for c in s.criteria]
@@ -351,6 +395,7 @@ def _session(
     cam_period = 1.0 / sim.scene.camera.rate
     gt_period = 1.0 / cfg.ground_truth_rate
     next_cam = next_gt = 0.0
+    truth = Truth(sim)  # the evaluation topic alone
     tick = 0
     _log_state(writer, sim)
     frame = sim.render_camera()
@@ -368,7 +413,7 @@ def _session(
             writer.write_lidar(sim)  # the lidar runs on the camera's clock
             next_cam += cam_period
         if t >= next_gt - 1e-9:
-            writer.write_ground_truth(t, sim.ground_truth())
+            writer.write_ground_truth(t, truth.ground_truth())
             next_gt += gt_period
         step = operator.tick()
         for mark in step.marks:

@@ -14,9 +14,8 @@ and replay.
 Both terms come from one thin SVD ``J = U Σ Vᵀ`` (``J`` is 6 x n): the damped step is
 ``V Σ (Σ² + λ²)⁻¹ Uᵀ e`` and ``J⁺ J = V_r V_rᵀ`` over the singular values above
 ``1e-4 σ_max`` (the truncation of ``numpy.linalg.pinv(J, rcond=1e-4)``). It runs up to
-three times per control period (until the POI is within :data:`TRACKED`), so the hot path
-calls LAPACK directly and reuses buffers: the IK was most of a campaign's time, more than
-the physics.
+three times per control period (until the POI is within :data:`TRACKED`) and is a
+campaign's hot path, so it calls LAPACK directly and reuses buffers.
 """
 
 from __future__ import annotations
@@ -42,9 +41,8 @@ WRIST_MARGIN = 0.05
 reach only beyond is reached the long way round (:meth:`CartesianController.yaw_subgoal`)."""
 TRACKED = (1e-4, 1e-3)
 """Within this of its target, position [m] and orientation [rad], a control period's
-POI needs no further IK iteration: the first one leaves a median 9 µm and 3 µrad (p90
-23 µm, 10 µrad; bench_pick replay), the next two refined that to a tenth of a µm,
-far below what the position servos track (mm), for two thirds of the IK's time."""
+POI needs no further IK iteration: further ones refine far below what the position servos
+track (mm)."""
 
 
 def target_rotation(yaw: float) -> np.ndarray:

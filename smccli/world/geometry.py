@@ -39,10 +39,9 @@ def wrap(angle: float, period: float = TWO_PI) -> float:
     (a direction defined modulo pi).
 
     ``(angle + period/2) % period - period/2``: the sum rounds, so an angle in range may
-    move by up to half an ulp of the period (4.4e-16 rad for 2 pi; measured on 200,000
-    angles with full mantissas: half of them move). It is the form compile has always
-    used, so trees keep their bits; ``math.remainder`` would be exact but moves 53 values
-    of the bench_pick tree by an ulp (docs/choices.md, "One geometry")."""
+    move by up to half an ulp of the period (4.4e-16 rad for 2 pi). This form keeps
+    compiled trees' bits (``math.remainder`` would be exact; docs/choices.md, "One
+    geometry")."""
     half = period / 2
     r = (angle + half) % period - half
     return half if r == -half else r
@@ -74,7 +73,7 @@ def yaw_of(R: ArrayLike) -> float:
 
 # --- quaternions [w, x, y, z] -------------------------------------------------------------
 # MuJoCo's mju_* conversions use our order natively and cost about 1 us a call; mujoco is
-# imported on first use (about 200 ms, measured) so that reading a log does not load it.
+# imported on first use (its import takes about 200 ms) so that reading a log does not load it.
 
 
 def yaw_quat(yaw: ArrayLike) -> np.ndarray:

@@ -3,7 +3,7 @@
 docs/design.md 9: 360 beams cost about 0.12 ms per call, cheap at 10 Hz; one ``mj_multiRay`` per
 scan beats 360 rangefinder sensors evaluated on every physics step. The robot's own geoms
 are left out through the geom group mask (``bodyexclude`` excludes one body, not its
-children: an arm link was hit by 339 of 360 beams). Beams follow ``foxglove.LaserScan``:
+children). Beams follow ``foxglove.LaserScan``:
 the first at angle -pi, counter-clockwise about the site's z axis, ``2 pi / n`` apart.
 """
 

@@ -5,14 +5,12 @@ joint unless fixed, its mass spread over its parts by volume."""
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import mujoco
 
 from smccli.world.geometry import yaw_quat
-
-if TYPE_CHECKING:
-    from smccli.world.scene import ObjectSpec
+from smccli.world.specs import ObjectSpec
 
 PYRAMID_STEPS = 3
 """A pyramid is approximated by this many stacked boxes (no meshes offline)."""

@@ -4,7 +4,8 @@ Times are simulation seconds (float) in memory and integer nanoseconds in logs.
 The arm's point of interest (POI) is the end-effector site: ``[x, y, z, yaw]`` in the
 world frame [m, m, m, rad] (a mobile manipulator's: in its base's frame), the gripper
 pointing down; the gripper opening is in [0, 1] (1 = fully open). A mobile base's pose is
-``[x, y, yaw]`` in odometry's frame.
+``[x, y, yaw]`` in odometry's frame. Commands and joint readings run at one rate,
+:data:`CONTROL_PERIOD`.
 """
 
 from __future__ import annotations
@@ -12,6 +13,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
+CONTROL_PERIOD = 0.01
+"""Control period [s] (100 Hz): the simulator takes one command per period and the sensors
+are read once per period (the physics timestep comes from the model, 2 ms)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,8 +1,9 @@
 """The simulation: a scene in MuJoCo, stepped one control period at a time, and its sensors.
 
-Everything the robot perceives goes through :meth:`Sim.render_camera`, :meth:`Sim.weight`,
-:meth:`Sim.joint_state` and :meth:`Sim.poi`. :meth:`Sim.ground_truth` and :meth:`Sim.success`
-read simulator state and are for evaluation only.
+Everything the robot perceives goes through :meth:`Sim.render_camera`, :meth:`Sim.lidar`,
+:meth:`Sim.weight`, :meth:`Sim.joint_state` and :meth:`Sim.poi`. What no sensor gives (object
+poses, the success criterion) is read by evaluation alone, through
+:class:`smccli.world.truth.Truth`.
 """
 
 from __future__ import annotations
@@ -26,53 +27,26 @@ from smccli.world.geometry import (
 )
 from smccli.world.layout import nominal_layout, place_objects
 from smccli.world.lidar import Lidar, LidarReading
+from smccli.world.marker import MARKER_BODY, MARKER_RADIUS, with_target_marker
 from smccli.world.noise import NoisySensors
-from smccli.world.robot import robot_geoms
 from smccli.world.robot_model import RobotModel
-from smccli.world.scene import (
-    HIDDEN_GROUP,
-    ROBOT_KEY,
-    Condition,
-    Group,
-    Layout,
-    ObjectSpec,
-    Scene,
+from smccli.world.scene import HIDDEN_GROUP, ROBOT_KEY, Layout, ObjectSpec, Scene
+from smccli.world.sensors import (
+    CONTROL_PERIOD,
+    CameraFrame,
+    JointState,
+    PoiCommand,
+    RobotGeometry,
 )
-from smccli.world.sensors import CameraFrame, JointState, PoiCommand, RobotGeometry
 
-ON_TOP_TOL = 0.015
-"""How far an object's lowest corner may be from the target's top face to rest on it [m]."""
-INSIDE_TOL = 0.005
-"""How far below the container's bottom an object's lowest corner may be [m] (contact
-penetration)."""
-REST_SPEED = (0.02, 0.2)
-"""At rest: linear [m/s] and angular [rad/s] speed below these."""
-MARKER_BODY = "smc_target"
-"""The teleop target marker's body (``Sim(target_marker=True)``)."""
-MARKER_RADIUS = 0.025
-"""Its sphere's radius [m]: big enough to pick with the mouse."""
-CONTROL_PERIOD = 0.01
-"""Control period [s] (100 Hz); the physics timestep comes from the model (2 ms)."""
+__all__ = ["CONTROL_PERIOD", "HIDDEN_GROUP", "MARKER_RADIUS", "OdometryDrift", "Sim"]
+"""Besides the simulator: the constants its users read here (the teleop viewer's)."""
+
 GRAVITY = 9.81
 PARK_DEPTH = 1.0
 """How far below the scene's lowest geom objects absent from a layout are parked [m]."""
 PARK_GAP = 0.1
 """Space between two parked objects [m]."""
-
-
-@dataclass(frozen=True, slots=True)
-class Success:
-    """Outcome of the scene's success criterion; truthy when the task succeeded."""
-
-    ok: bool
-    """Whether a task's criterion holds."""
-    reason: str
-    """Which task and condition held, or why none did."""
-    criteria: tuple[tuple[str, str, bool], ...] = ()
-    """Every condition tried: (task, what it found, whether it held)."""
-
-    def __bool__(self) -> bool:
-        return self.ok
 
 
 @dataclass(frozen=True, slots=True)
@@ -94,7 +68,8 @@ class Sim:
 
     A mobile base's POI is its odometry: the joint readings, or with ``drift`` the motion
     integrated with that error. Base targets are then in odometry's frame, as a real base
-    controller's are; :meth:`base_pose` (evaluation only) is the truth."""
+    controller's are; :meth:`smccli.world.truth.Truth.base_pose` (evaluation only) is the
+    truth."""
 
     def __init__(
         self,
@@ -107,14 +82,14 @@ class Sim:
     ) -> None:
         self.scene = scene
         self.drift = drift
-        self.model = scene.model() if not target_marker else _with_target_marker(scene)
+        self.model = scene.model() if not target_marker else with_target_marker(scene)
         self.marker_id = (
             mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, MARKER_BODY)
             if target_marker
             else -1
         )
         """The teleop target marker's body (a mocap body the person drags in the viewer),
-        or -1: see :func:`_with_target_marker`."""
+        or -1: see :func:`smccli.world.marker.with_target_marker`."""
         self.data = mujoco.MjData(self.model)
         m = self.model
         self.control_period = CONTROL_PERIOD
@@ -131,47 +106,9 @@ class Sim:
             if robot.arm_joints
             else None
         )
-        act = mujoco.mjtObj.mjOBJ_ACTUATOR
-        base = robot.base.joints if robot.base else ()
-        fingers = robot.gripper.joints if robot.gripper else ()
-        self._jnames = robot.joint_names
-        joints = [self._id(mujoco.mjtObj.mjOBJ_JOINT, n) for n in self._jnames]
-        self._jq = np.array([m.jnt_qposadr[j] for j in joints], dtype=int)
-        self._jv = np.array([m.jnt_dofadr[j] for j in joints], dtype=int)
-        n_base, n_arm = len(base), len(robot.arm_joints)
-        self._base_q = self._jq[:n_base]
-        self._arm_q = self._jq[n_base : n_base + n_arm]
-        self._finger_q = self._jq[n_base + n_arm :]
-        self._finger_v = self._jv[n_base + n_arm :]
-        self._base_act = np.array(
-            [self._id(act, n) for n in (robot.base.actuators if robot.base else ())], dtype=int
-        )
-        self._base_body = (
-            int(m.jnt_bodyid[self._id(mujoco.mjtObj.mjOBJ_JOINT, base[-1])]) if base else -1
-        )
-        self._arm_act = np.array([self._id(act, n) for n in robot.arm_actuators], dtype=int)
-        self._grip_act = self._id(act, robot.gripper.actuator) if robot.gripper else -1
-        assert len(fingers) == len(self._finger_q)
-        self._lidar = None
-        self._lidar_site = -1
-        for s in robot.sensors:
-            if s.type == "lidar":
-                self._lidar = Lidar(m, s.target, ignore_group=(robot.geom_group, HIDDEN_GROUP))
-                self._lidar_site = self._id(mujoco.mjtObj.mjOBJ_SITE, s.target)
-        self._cam_id = self._id(mujoco.mjtObj.mjOBJ_CAMERA, scene.camera.name)
-        self._body = {o.name: self._id(mujoco.mjtObj.mjOBJ_BODY, o.name) for o in scene.objects}
-        for f in scene.furniture:  # moved by the layout as fixed objects are
-            self._body[f.name] = self._id(mujoco.mjtObj.mjOBJ_BODY, f.name)
-        self._free_qadr = {}
-        for o in scene.objects:
-            if not o.fixed:
-                jid = m.body_jntadr[self._body[o.name]]
-                self._free_qadr[o.name] = (m.jnt_qposadr[jid], m.jnt_dofadr[jid])
-        self._scale_sensor = None
-        if scene.scale is not None:
-            sid = self._id(mujoco.mjtObj.mjOBJ_SENSOR, f"{scene.scale}_force")
-            self._scale_sensor = m.sensor_adr[sid]
-        self._robot_geoms = robot_geoms(robot, m)
+        self._index_robot()
+        self._index_sensors()
+        self._index_world()
         self._renderer: mujoco.Renderer | None = None
         self._robot: RobotModel | None = None
         self._last = PoiCommand(0.0, np.zeros(4), 1.0)
@@ -191,13 +128,66 @@ class Sim:
         self._parked: tuple[int, ...] = ()
         self.reset(layout, base_pose)
 
+    def _index_robot(self) -> None:
+        """Where the robot's joints sit in qpos/qvel (base, arm, fingers, in the robot
+        file's order) and its actuators' ids."""
+        m, robot = self.model, self.robot
+        act = mujoco.mjtObj.mjOBJ_ACTUATOR
+        base = robot.base.joints if robot.base else ()
+        fingers = robot.gripper.joints if robot.gripper else ()
+        self._jnames = robot.joint_names
+        joints = [self._id(mujoco.mjtObj.mjOBJ_JOINT, n) for n in self._jnames]
+        self._jq = np.array([m.jnt_qposadr[j] for j in joints], dtype=int)
+        self._jv = np.array([m.jnt_dofadr[j] for j in joints], dtype=int)
+        n_base, n_arm = len(base), len(robot.arm_joints)
+        self.base_qpos = self._jq[:n_base]
+        """qpos addresses of a mobile base's joints ``x, y, yaw`` (empty for an arm)."""
+        self._arm_q = self._jq[n_base : n_base + n_arm]
+        self._finger_q = self._jq[n_base + n_arm :]
+        self._finger_v = self._jv[n_base + n_arm :]
+        self._base_act = np.array(
+            [self._id(act, n) for n in (robot.base.actuators if robot.base else ())], dtype=int
+        )
+        self._base_body = (
+            int(m.jnt_bodyid[self._id(mujoco.mjtObj.mjOBJ_JOINT, base[-1])]) if base else -1
+        )
+        self._arm_act = np.array([self._id(act, n) for n in robot.arm_actuators], dtype=int)
+        self._grip_act = self._id(act, robot.gripper.actuator) if robot.gripper else -1
+        assert len(fingers) == len(self._finger_q)
+
+    def _index_sensors(self) -> None:
+        """The lidar (and its site), the sensor camera and the scale's force sensor."""
+        m, scene = self.model, self.scene
+        self._lidar = None
+        self._lidar_site = -1
+        for s in self.robot.sensors:
+            if s.type == "lidar":
+                self._lidar = Lidar(m, s.target, ignore_group=(self.robot.geom_group, HIDDEN_GROUP))
+                self._lidar_site = self._id(mujoco.mjtObj.mjOBJ_SITE, s.target)
+        self._cam_id = self._id(mujoco.mjtObj.mjOBJ_CAMERA, scene.camera.name)
+        self._scale_sensor = None
+        if scene.scale is not None:
+            sid = self._id(mujoco.mjtObj.mjOBJ_SENSOR, f"{scene.scale}_force")
+            self._scale_sensor = m.sensor_adr[sid]
+
+    def _index_world(self) -> None:
+        """The bodies a layout places (objects, furniture) and the free objects' joints."""
+        m, scene = self.model, self.scene
+        body = mujoco.mjtObj.mjOBJ_BODY
+        self.bodies = {o.name: self._id(body, o.name) for o in scene.objects}
+        """Body id of each object, then of each piece of furniture (moved by the layout
+        as fixed objects are)."""
+        for f in scene.furniture:
+            self.bodies[f.name] = self._id(body, f.name)
+        self.free_joints: dict[str, tuple[int, int]] = {}
+        """A free object's joint: its (qpos, qvel) addresses."""
+        for o in scene.objects:
+            if not o.fixed:
+                jid = m.body_jntadr[self.bodies[o.name]]
+                self.free_joints[o.name] = (m.jnt_qposadr[jid], m.jnt_dofadr[jid])
+
     def _id(self, kind: mujoco.mjtObj, name: str) -> int:
-        i = mujoco.mj_name2id(self.model, kind, name)
-        if i < 0:
-            raise SceneError(
-                f"scene {self.scene.name}: model has no {kind.name[6:].lower()} {name!r}"
-            )
-        return i
+        return model_id(self.model, kind, name, self.scene.name)
 
     # --- state -------------------------------------------------------------------------
 
@@ -232,17 +222,18 @@ class Sim:
         if base_pose is None:
             base_pose = np.zeros(3) if start is None else np.array([start[0], start[1], start[3]])
         base_pose = np.asarray(base_pose, dtype=float)
-        unknown = [name for name in layout if name not in self._body]
+        unknown = [name for name in layout if name not in self.bodies]
         if unknown:
             raise SceneError(
                 f"layout: no object {unknown[0]!r} in scene {self.scene.name}"
-                f" ({', '.join(self._body)})"
+                f" ({', '.join(self.bodies)})"
             )
         place_objects(m, d, layout)
         # Objects the layout leaves out (another variant's) leave the world.
         self._park([o for o in self.scene.objects if o.name not in layout])
         self.present = tuple(n for n in layout)
-        """Names of the objects the layout placed (evaluation only)."""
+        """Names of the objects the layout placed (for evaluation and the operator, who see
+        the world)."""
         if self.controller is not None:
             home = self.robot.home_array()
             d.qpos[self._arm_q] = home
@@ -251,8 +242,8 @@ class Sim:
         if self.robot.gripper is not None:
             d.qpos[self._finger_q] = self.robot.gripper.open
             d.ctrl[self._grip_act] = self.robot.gripper.open
-        if len(self._base_q):
-            d.qpos[self._base_q] = base_pose
+        if len(self.base_qpos):
+            d.qpos[self.base_qpos] = base_pose
             d.ctrl[self._base_act] = base_pose
         mujoco.mj_forward(m, d)
         self._odom = base_pose.copy()
@@ -272,12 +263,12 @@ class Sim:
 
         Resting them on a floor would need free floor out of every sensor's view, which a
         mobile robot's scenes do not have; and a floor plane is a half-space in MuJoCo: an
-        object parked under one is thrown out of it (loco_manip's, at 22 m/s)."""
+        object parked under one is thrown out of it."""
         m, d = self.model, self.data
         x = float(m.stat.center[0])
         parked = []
         for o in objects:
-            root = self._body[o.name]
+            root = self.bodies[o.name]
             bodies = [b for b in range(m.nbody) if _descends(m, b, root)]
             geoms = np.flatnonzero(np.isin(m.geom_bodyid, bodies))
             m.geom_contype[geoms] = 0
@@ -286,10 +277,10 @@ class Sim:
             radius = float(m.geom_rbound[geoms].max(initial=0.1))
             at = [x + radius, float(m.stat.center[1]), self.park_z]
             x += 2 * radius + PARK_GAP
-            if o.name not in self._free_qadr:  # a static body (a poster): move it
+            if o.name not in self.free_joints:  # a static body (a poster): move it
                 m.body_pos[root], m.body_quat[root] = at, [1, 0, 0, 0]
                 continue
-            qa, _ = self._free_qadr[o.name]
+            qa, _ = self.free_joints[o.name]
             d.qpos[qa : qa + 7] = [*at, 1, 0, 0, 0]
             parked += bodies
         self._parked = tuple(parked)
@@ -338,16 +329,16 @@ class Sim:
             # the joints' frame (identity without drift).
             odom_to_true = compose(self._odom_truth, inverse(self._odom))
             x, y, yaw = compose(odom_to_true, base)
-            yaw_now = float(self.data.qpos[self._base_q[2]])
+            yaw_now = float(self.data.qpos[self.base_qpos[2]])
             yaw = yaw_now + wrap(float(yaw) - yaw_now)
             self.data.ctrl[self._base_act] = [x, y, yaw]
         mujoco.mj_step(self.model, self.data, nstep=self.n_substeps)
-        if len(self._base_q):
+        if len(self.base_qpos):
             self._integrate_odometry()
 
     def _integrate_odometry(self) -> None:
         """Add this period's body-frame motion to odometry, with the drift's error."""
-        now = self.data.qpos[self._base_q].astype(float)
+        now = self.data.qpos[self.base_qpos].astype(float)
         if self.drift is None:
             self._odom, self._odom_truth = now.copy(), now.copy()
             return
@@ -376,7 +367,7 @@ class Sim:
             R = R_b.T @ d.site_xmat[self.poi_id].reshape(3, 3)
             p = R_b.T @ (d.site_xpos[self.poi_id] - d.xpos[b])
             return np.array([*p, yaw_of(R)])
-        if len(self._base_q):
+        if len(self.base_qpos):
             x, y, yaw = self.base_odometry()
             return (
                 np.array([x, y, 0.0, yaw])
@@ -410,7 +401,7 @@ class Sim:
             return None
         d = self.data
         site = np.array([*d.site_xpos[self._lidar_site][:2], yaw_of(d.site_xmat[self._lidar_site])])
-        mount = between(self._base_truth(), site)
+        mount = between(self._base_world(), site)
         mount[2] = wrap(mount[2])
         out = compose(self.base_odometry(), mount)
         out[2] = wrap(out[2])
@@ -505,7 +496,7 @@ class Sim:
         r.update_scene(self.data, camera=self._cam_id, scene_option=opt)
         rgb = r.render().copy()
         # Depth is a second pass: mujoco.Renderer draws it with segmentation colours, and
-        # its depth then differs from the lit pass's by about 1 mm at the table (measured);
+        # its depth then differs from the lit pass's by about 1 mm at the table;
         # logs hold the segmented pass's, so replay must perceive the same.
         r.enable_depth_rendering()
         r.update_scene(self.data, camera=self._cam_id, scene_option=opt)
@@ -535,11 +526,11 @@ class Sim:
         # MuJoCo cameras look along −z with y up: flip y and z for the optical convention.
         T[:3, :3] = self.data.cam_xmat[self._cam_id].reshape(3, 3) @ np.diag([1.0, -1.0, -1.0])
         T[:3, 3] = self.data.cam_xpos[self._cam_id]
-        if len(self._base_q) and self.drift is not None:
-            T = planar_se3(self.base_odometry()) @ np.linalg.inv(planar_se3(self._base_truth())) @ T
+        if len(self.base_qpos) and self.drift is not None:
+            T = planar_se3(self.base_odometry()) @ np.linalg.inv(planar_se3(self._base_world())) @ T
         return T
 
-    def _base_truth(self) -> np.ndarray:
+    def _base_world(self) -> np.ndarray:
         """The base body's planar pose from the joints ``[x, y, yaw]`` (what odometry
         integrates; used only to express mountings relative to the base)."""
         d, b = self.data, self._base_body
@@ -551,247 +542,14 @@ class Sim:
             self._renderer.close()
             self._renderer = None
 
-    # --- evaluation only ---------------------------------------------------------------
 
-    def ground_truth(self) -> dict[str, np.ndarray]:
-        """Object poses ``[x, y, z, qw, qx, qy, qz]`` (evaluation only, never for perception)."""
-        d = self.data
-        return {n: np.concatenate([d.xpos[b], d.xquat[b]]) for n, b in self._body.items()}
-
-    def base_pose(self) -> np.ndarray:
-        """The mobile base's true pose ``[x, y, yaw]`` (evaluation only; control reads
-        :meth:`poi`, odometry)."""
-        q = self.data.qpos[self._base_q]
-        return np.array([q[0], q[1], wrap(float(q[2]))])
-
-    def robot_contacts(self) -> list[str]:
-        """Names of what the robot's collision geoms touch now, floor excluded (evaluation
-        only: a mobile base's collisions; a mobile manipulator's hand is left out)."""
-        m, d = self.model, self.data
-        mine = set(self._robot_geoms)
-        if self.mobile_manipulator:
-            # Its hand is meant to touch: the fingers and the body they ride on (the palm)
-            # grasp handles and objects; the base and the arm's links must touch nothing.
-            fingers = self.robot.gripper.joints if self.robot.gripper else ()
-            hand = {int(m.jnt_bodyid[m.joint(j).id]) for j in fingers}
-            hand |= {int(m.body_parentid[b]) for b in hand}
-            mine = {g for g in mine if int(m.geom_bodyid[g]) not in hand}
-        out = []
-        for i in range(d.ncon):
-            c = d.contact[i]
-            g1, g2 = int(c.geom1), int(c.geom2)
-            if (g1 in mine) == (g2 in mine):
-                continue
-            other = g2 if g1 in mine else g1
-            if m.geom_type[other] == mujoco.mjtGeom.mjGEOM_PLANE:
-                continue
-            out.append(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, other) or f"geom {other}")
-        return out
-
-    def door_opening(self, joint: str) -> float:
-        """A door's joint value now [m or rad] (evaluation only)."""
-        return float(
-            self.data.qpos[self.model.jnt_qposadr[self._id(mujoco.mjtObj.mjOBJ_JOINT, joint)]]
-        )
-
-    def fingers_on(self, geom: str) -> int:
-        """How many finger bodies touch ``geom`` now (evaluation only: a handle held)."""
-        m, d = self.model, self.data
-        g = self._id(mujoco.mjtObj.mjOBJ_GEOM, geom)
-        fingers = self.robot.gripper.joints if self.robot.gripper else ()
-        bodies = {int(m.jnt_bodyid[m.joint(j).id]) for j in fingers}
-        touching = set()
-        for i in range(d.ncon):
-            c = d.contact[i]
-            for a, b in ((c.geom1, c.geom2), (c.geom2, c.geom1)):
-                if a == g and int(m.geom_bodyid[b]) in bodies:
-                    touching.add(int(m.geom_bodyid[b]))
-        return len(touching)
-
-    def has_body(self, name: str) -> bool:
-        """Whether the scene's MJCF has a body ``name`` (a door's handle, for the operator)."""
-        return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name) >= 0
-
-    def object_pose(self, name: str) -> np.ndarray:
-        """Object ``[x, y, z, yaw]`` (for the simulated operator and evaluation); also any
-        body of the MJCF by name (a handle on a moving door)."""
-        b = self._body.get(name)
-        if b is None:
-            b = self._id(mujoco.mjtObj.mjOBJ_BODY, name)
-        return np.array([*self.data.xpos[b], yaw_of(self.data.xmat[b])])
-
-    def push_object(self, name: str, dx: float, dy: float) -> None:
-        """Move a free object by ``dx``, ``dy`` [m] on the table and stop it: someone pushed
-        it (a disturbance for benchmarks; control learns of it only through the camera)."""
-        if name not in self._free_qadr:
-            raise ValueError(f"push_object: {name!r} is not a free object of the scene")
-        qa, va = self._free_qadr[name]
-        self.data.qpos[qa : qa + 2] += (dx, dy)
-        self.data.qvel[va : va + 6] = 0.0
-        mujoco.mj_forward(self.model, self.data)
-
-    def object_speed(self, name: str) -> float:
-        """Linear speed of an object's body [m/s]."""
-        if name not in self._free_qadr:
-            return 0.0
-        _, va = self._free_qadr[name]
-        return float(np.linalg.norm(self.data.qvel[va : va + 3]))
-
-    def holds(self, cond: Condition) -> tuple[bool, str]:
-        """Whether ``cond`` holds now: the object rests on top of / inside the target, or
-        the base stands at the place."""
-        if cond.relation == "at":
-            gx, gy, gyaw = self.scene.place(cond.target)
-            x, y, yaw = self.base_pose()
-            dist, dyaw = math.hypot(x - gx, y - gy), abs(wrap(float(yaw - gyaw)))
-            ok = dist <= cond.tolerance[0] and dyaw <= cond.tolerance[1]
-            return ok, (
-                f"base {'at' if ok else 'not at'} {cond.target} ({dist * 100:.1f} cm, "
-                f"{math.degrees(dyaw):.1f} deg off)"
-            )
-        obj, tgt = self.scene.object(cond.object), self.scene.object(cond.target)
-        po, pt = self.object_pose(obj.name), self.object_pose(tgt.name)
-        # The object's corners (its geoms' bounding boxes) in the target's yawed frame,
-        # relative to the target's centre.
-        c, s = math.cos(pt[3]), math.sin(pt[3])
-        R_t = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        corners = (self._corners(obj.name) - pt[:3]) @ R_t
-        t_top, t_bottom = tgt.size[2] / 2, -tgt.size[2] / 2
-        still, touching = self._at_rest(obj.name), self._touching(obj.name)
-        others = sorted(touching - {tgt.name})
-        if cond.relation == "on_top_of":
-            # Resting on the top face: the centre over the face, the bottom on it, and held
-            # by the target alone (a box hanging over an edge also touches the table). Not
-            # the whole footprint: pick_place's cube (diagonal 7.07 cm) overhangs the
-            # 7 cm cylinder by a hair when perfectly centred (docs/choices.md).
-            lx, ly = (po[:3] - pt[:3]) @ R_t[:, :2]
-            over = _in_footprint(tgt, lx, ly, margin=0.0)
-            seated = abs(corners[:, 2].min() - t_top) < ON_TOP_TOL
-            ok = over and seated and still and touching == {tgt.name}
-            why = f"{obj.name} {'on' if ok else 'not resting on'} {tgt.name}"
-        else:  # inside: every corner within the inner walls, above the floor
-            inner = tgt.wall if tgt.shape == "open_box" else 0.0
-            within = all(_in_footprint(tgt, x, y, margin=inner) for x, y in corners[:, :2])
-            above = corners[:, 2].min() > t_bottom - INSIDE_TOL
-            ok = (
-                within
-                and above
-                and corners[:, 2].min() < t_top
-                and still
-                and not (touching - {tgt.name})
-            )
-            why = f"{obj.name} {'inside' if ok else 'not resting inside'} {tgt.name}"
-        if not ok:
-            detail = [] if still else ["moving"]
-            if others:
-                detail.append(f"touching {', '.join(others)}")
-            if detail:
-                why += f" ({'; '.join(detail)})"
-        return ok, why
-
-    def _corners(self, name: str) -> np.ndarray:
-        """World corners of the bounding boxes of a body's geoms, shape (8 * geoms, 3) [m]."""
-        m, d = self.model, self.data
-        b = self._body[name]
-        signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
-        out = []
-        for g in np.flatnonzero(m.geom_bodyid == b):
-            centre, half = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
-            local = centre + signs * half
-            out.append(d.geom_xpos[g] + local @ d.geom_xmat[g].reshape(3, 3).T)
-        return np.concatenate(out)
-
-    def _at_rest(self, name: str) -> bool:
-        """Linear and angular speed under :data:`REST_SPEED` (free objects; fixed: True)."""
-        if name not in self._free_qadr:
-            return True
-        _, va = self._free_qadr[name]
-        v = self.data.qvel[va : va + 6]
-        return bool(np.linalg.norm(v[:3]) < REST_SPEED[0] and np.linalg.norm(v[3:]) < REST_SPEED[1])
-
-    def _touching(self, name: str) -> set[str]:
-        """Names of what touches the object: scene objects and furniture (a body inside
-        one, like a scale's platform, counts as it), the robot, else the body's name
-        (the table, the floor)."""
-        m, d = self.model, self.data
-        b = self._body[name]
-        robot = {int(m.geom_bodyid[g]) for g in self._robot_geoms}
-        owner = {v: k for k, v in self._body.items()}
-        out = set()
-        for i in range(d.ncon):
-            con = d.contact[i]
-            b1, b2 = int(m.geom_bodyid[con.geom1]), int(m.geom_bodyid[con.geom2])
-            if b not in (b1, b2):
-                continue
-            other = b2 if b1 == b else b1
-            if other in robot:
-                out.add("robot")
-                continue
-            while other not in owner and m.body_parentid[other] != 0:
-                other = int(m.body_parentid[other])
-            out.add(
-                owner.get(other) or mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, other) or "world"
-            )
-        return out
-
-    def success(self, task: str | None = None) -> Success:
-        """The scene's success criterion for ``task`` (default: any task succeeds)."""
-        crits = [c for c in self.scene.success if task is None or c.task == task]
-        if task is None:  # only the criteria of the variant on show
-            crits = [c for c in crits if c.variant is None or self.shows(c.variant)]
-            if not crits:
-                return Success(False, "no task's criterion applies to this layout")
-        if not crits:
-            valid = ", ".join(c.task for c in self.scene.success)
-            raise SceneError(f"scene {self.scene.name}: no task {task!r} (tasks: {valid})")
-        reasons, details = [], []
-        for crit in crits:
-            ok, results = self._holds_group(crit.rule)
-            details += [(crit.task, text, held) for text, held, _ in results]
-            if ok:
-                # What made it hold: every all_of condition, the first any_of one that held.
-                shown = _explain(results, True)
-                return Success(True, f"{crit.task}: {'; '.join(shown)}", tuple(details))
-            reasons.append(f"{crit.task}: " + "; ".join(_explain(results, False)))
-        return Success(False, " | ".join(reasons), tuple(details))
-
-    def _holds_group(self, group: Group) -> tuple[bool, list[tuple[str, bool, str]]]:
-        """Whether ``group`` holds, and each of its conditions' (text, held, the kind of
-        the group right above it), in file order."""
-        oks, results = [], []
-        for item in group.items:
-            if isinstance(item, Group):
-                ok, inner = self._holds_group(item)
-            else:
-                held, text = self.holds(item)
-                ok = bool(held)  # numpy's bool from a comparison is no JSON boolean
-                inner = [(text, ok, group.kind)]
-            oks.append(ok)
-            results += inner
-        if group.kind == "all_of":
-            return all(oks), results
-        if group.kind == "any_of":
-            return any(oks), results
-        return not any(oks), results
-
-    def shows(self, variant: str) -> bool:
-        """Whether the layout shows every object of ``variant``."""
-        return set(dict(self.scene.variants)[variant]) <= set(self.present)
-
-
-@dataclass(frozen=True, slots=True)
-class Push:
-    """Someone moves an object while the robot works (:meth:`Sim.push_object`): a
-    disturbance for benchmarks and tests, never seen by control but through the camera."""
-
-    object: str
-    """The free object moved."""
-    at: float
-    """Simulation time of the push [s]."""
-    dx: float
-    """Displacement along world x [m]."""
-    dy: float
-    """Displacement along world y [m]."""
+def model_id(model: mujoco.MjModel, kind: mujoco.mjtObj, name: str, scene: str) -> int:
+    """The id of the ``kind`` called ``name`` in ``model`` (of scene ``scene``); SceneError
+    when the model has none."""
+    i = mujoco.mj_name2id(model, kind, name)
+    if i < 0:
+        raise SceneError(f"scene {scene}: model has no {kind.name[6:].lower()} {name!r}")
+    return i
 
 
 def _descends(m: mujoco.MjModel, body: int, root: int) -> bool:
@@ -816,49 +574,3 @@ def _layout_seed(layout: Layout) -> int:
     """A seed from a layout's poses (its names and numbers, in order)."""
     text = repr(sorted((k, tuple(float(x) for x in v)) for k, v in layout.items()))
     return int.from_bytes(hashlib.sha256(text.encode()).digest()[:8], "little")
-
-
-def _with_target_marker(scene: Scene) -> mujoco.MjModel:
-    """The scene's model plus the teleop target marker: a mocap body :data:`MARKER_BODY`
-    with one small sphere in geom group :data:`HIDDEN_GROUP` that collides with nothing.
-
-    MuJoCo's viewer lets a person select a body (double-click) and move a mocap body with
-    Ctrl + right drag (rotate: Ctrl + left drag), which is how the paper's interactive
-    marker is dragged. A mocap body has no degrees of freedom and the geom no contacts, so
-    the physics is the scene's to the bit (``tests/test_keyboard.py`` checks it); the
-    sensor camera and the lidar leave the marker's group out.
-    """
-    spec = mujoco.MjSpec.from_string(scene.mjcf)
-    body = spec.worldbody.add_body(name=MARKER_BODY, mocap=True)
-    body.add_geom(
-        type=mujoco.mjtGeom.mjGEOM_SPHERE,
-        size=[MARKER_RADIUS, 0, 0],
-        rgba=[1.0, 0.1, 0.9, 0.7],
-        group=HIDDEN_GROUP,
-        contype=0,
-        conaffinity=0,
-        mass=0.0,
-    )
-    return spec.compile()
-
-
-def _in_footprint(tgt: ObjectSpec, lx: float, ly: float, margin: float) -> bool:
-    if tgt.shape == "cylinder":
-        return math.hypot(lx, ly) < tgt.size[0] / 2 - margin
-    return abs(lx) < tgt.size[0] / 2 - margin and abs(ly) < tgt.size[1] / 2 - margin
-
-
-def _explain(results: list[tuple[str, bool, str]], ok: bool) -> list[str]:
-    """The conditions that say why a criterion held (``ok``: every one under an all_of,
-    the first that held under an any_of) or failed (a none_of condition that held; else
-    every one that did not)."""
-    if ok:
-        shown = [t for t, held, kind in results if held and kind == "all_of"]
-        first = next((t for t, held, kind in results if held and kind == "any_of"), None)
-        return shown + ([first] if first else [])
-    bad = [t for t, held, kind in results if held and kind == "none_of"]
-    if bad:
-        return bad
-    return [t for t, held, kind in results if kind != "none_of" and not held] or [
-        t for t, _, _ in results
-    ]
