@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
@@ -41,11 +41,40 @@ from smccli.world.geometry import (
     wrap_yaw,
 )
 
-if TYPE_CHECKING:
-    from smccli.learn.smc import Action
 
-FRAMES = ("world", "object", "scan", "hand", "base")
-"""Where an action's goal may be stored (``Action.goal_frame``)."""
+class Action(Protocol):
+    """What mapping a goal back reads of an action: the fields of
+    :class:`smccli.learn.smc.Action` of the same names (that module stores goals with this
+    one's functions, so this one names the fields instead of importing the class)."""
+
+    @property
+    def goal_frame(self) -> str:
+        """``world``, ``object``, ``scan``, ``hand`` or ``base``."""
+
+    @property
+    def goal(self) -> np.ndarray:
+        """The goal in ``goal_frame``, shape (4,) [m, rad]."""
+
+    @property
+    def poi(self) -> str | None:
+        """``hand``, ``base`` or None (a robot with one POI)."""
+
+    @property
+    def symmetry(self) -> float:
+        """Yaw symmetry of the goal's frame [rad]."""
+
+    @property
+    def held_symmetry(self) -> float:
+        """Yaw symmetry of the object held [rad]."""
+
+    @property
+    def base_goal(self) -> np.ndarray | None:
+        """A mobile manipulator's base goal in ``goal_frame``, shape (4,)."""
+
+    @property
+    def hand_yaw(self) -> float | None:
+        """With ``goal_frame == "hand"``: the hand's yaw on its base as taught [rad]."""
+
 
 # --- object ----------------------------------------------------------------------------
 
