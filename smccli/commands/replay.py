@@ -14,113 +14,121 @@ from rich.table import Table
 
 from smccli.commands.console import live, out, say
 from smccli.commands.verify import print_verification
-from smccli.errors import SmcError
 
 if TYPE_CHECKING:
     from smccli.execute.episode import EpisodeResult
     from smccli.execute.teach import TeachConfig
 
 
+# The options of smc replay, one alias each (the command's signature stays a list).
+TreeArg = Annotated[Path | None, typer.Argument(help="Tree file (tree.json); none with --verify.")]
+SceneOption = Annotated[str | None, typer.Option(help="Scene name or path; default: the tree's.")]
+SeedOption = Annotated[int, typer.Option(help="Seed of the layout (and of a campaign).")]
+LayoutOption = Annotated[
+    Path | None,
+    typer.Option(help="Layout file (YAML/JSON: object -> [x, y, z, yaw]).", dir_okay=False),
+]
+OutputOption = Annotated[Path | None, typer.Option("-o", "--output", help="Replay log (.mcap).")]
+ReportOption = Annotated[Path | None, typer.Option(help="Report (JSON).")]
+TrialsOption = Annotated[int, typer.Option(help="Run a campaign of N randomised layouts.")]
+WorkersOption = Annotated[int, typer.Option(help="Processes for a campaign (default: all cores).")]
+ClusterOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Run the campaign's trials on the workers of this Dask scheduler "
+        "(e.g. tcp://10.0.0.5:8786) instead of local processes."
+    ),
+]
+MinSuccessOption = Annotated[
+    float | None, typer.Option(help="Exit 1 if the campaign's success rate is below this.")
+]
+TeachOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Where no SMC is contingent, an operator (script or keyboard) continues from "
+        "there; the continuation is recorded, compiled into the tree from that node, and "
+        "execution goes on."
+    ),
+]
+ScriptOption = Annotated[
+    Path | None,
+    typer.Option(help="Teleop script of the continuation (--teach script).", dir_okay=False),
+]
+VerifyOption = Annotated[
+    Path | None,
+    typer.Option(
+        help="The same as `smc verify LOG` (kept as an alias): play a recorded log's "
+        "commands again and report how far the robot strays (exit 1 beyond tolerance).",
+        dir_okay=False,
+    ),
+]
+ForceOption = Annotated[bool, typer.Option(help="Overwrite existing outputs.")]
+DriftOption = Annotated[
+    float,
+    typer.Option(
+        help="A mobile base's odometry error: distance off by this fraction and heading "
+        "off by this many rad per metre driven (e.g. 0.02).",
+        min=0.0,
+        max=0.5,
+    ),
+]
+SpeedOption = Annotated[
+    float,
+    typer.Option(
+        help="Play every movement primitive this many times faster than demonstrated "
+        "(up to the tree's limit: the robot's POI is held to 0.5 m/s)."
+    ),
+]
+LookPeriodOption = Annotated[
+    float | None,
+    typer.Option(
+        help="While an arm acts on an object, look at it again every this many seconds "
+        "and move the goal where it went (0: never; default 1).",
+    ),
+]
+
+
 def replay(
-    tree: Annotated[
-        Path | None, typer.Argument(help="Tree file (tree.json); none with --verify.")
-    ] = None,
-    scene: Annotated[
-        str | None, typer.Option(help="Scene name or path; default: the tree's.")
-    ] = None,
-    seed: Annotated[int, typer.Option(help="Seed of the layout (and of a campaign).")] = 0,
-    layout: Annotated[
-        Path | None,
-        typer.Option(help="Layout file (YAML/JSON: object -> [x, y, z, yaw]).", dir_okay=False),
-    ] = None,
-    output: Annotated[
-        Path | None, typer.Option("-o", "--output", help="Replay log (.mcap).")
-    ] = None,
-    report: Annotated[Path | None, typer.Option(help="Report (JSON).")] = None,
-    trials: Annotated[int, typer.Option(help="Run a campaign of N randomised layouts.")] = 0,
-    workers: Annotated[
-        int, typer.Option(help="Processes for a campaign (default: all cores).")
-    ] = 0,
-    cluster: Annotated[
-        str | None,
-        typer.Option(
-            help="Run the campaign's trials on the workers of this Dask scheduler "
-            "(e.g. tcp://10.0.0.5:8786) instead of local processes."
-        ),
-    ] = None,
-    min_success: Annotated[
-        float | None, typer.Option(help="Exit 1 if the campaign's success rate is below this.")
-    ] = None,
-    teach: Annotated[
-        str | None,
-        typer.Option(
-            help="Where no SMC is contingent, an operator (script or keyboard) continues from "
-            "there; the continuation is recorded, compiled into the tree from that node, and "
-            "execution goes on."
-        ),
-    ] = None,
-    script: Annotated[
-        Path | None,
-        typer.Option(help="Teleop script of the continuation (--teach script).", dir_okay=False),
-    ] = None,
-    verify: Annotated[
-        Path | None,
-        typer.Option(
-            help="The same as `smc verify LOG` (kept as an alias): play a recorded log's "
-            "commands again and report how far the robot strays (exit 1 beyond tolerance).",
-            dir_okay=False,
-        ),
-    ] = None,
-    force: Annotated[bool, typer.Option(help="Overwrite existing outputs.")] = False,
-    odometry_drift: Annotated[
-        float,
-        typer.Option(
-            help="A mobile base's odometry error: distance off by this fraction and heading "
-            "off by this many rad per metre driven (e.g. 0.02).",
-            min=0.0,
-            max=0.5,
-        ),
-    ] = 0.0,
-    speed: Annotated[
-        float,
-        typer.Option(
-            help="Play every movement primitive this many times faster than demonstrated "
-            "(up to the tree's limit: the robot's POI is held to 0.5 m/s)."
-        ),
-    ] = 1.0,
-    look_period: Annotated[
-        float | None,
-        typer.Option(
-            help="While an arm acts on an object, look at it again every this many seconds "
-            "and move the goal where it went (0: never; default 1).",
-        ),
-    ] = None,
+    tree: TreeArg = None,
+    scene: SceneOption = None,
+    seed: SeedOption = 0,
+    layout: LayoutOption = None,
+    output: OutputOption = None,
+    report: ReportOption = None,
+    trials: TrialsOption = 0,
+    workers: WorkersOption = 0,
+    cluster: ClusterOption = None,
+    min_success: MinSuccessOption = None,
+    teach: TeachOption = None,
+    script: ScriptOption = None,
+    verify: VerifyOption = None,
+    force: ForceOption = False,
+    odometry_drift: DriftOption = 0.0,
+    speed: SpeedOption = 1.0,
+    look_period: LookPeriodOption = None,
 ) -> None:
     """Execute the tree autonomously in simulation: one episode or a campaign."""
-    from smccli.execute import run_episode
+    from smccli.execute import replay_command, run_episode
     from smccli.execute.executor import LOOK_PERIOD
     from smccli.execute.verify import verify_log
-    from smccli.world.sim import OdometryDrift
 
     look = LOOK_PERIOD if look_period is None else look_period
-
-    if verify is not None:
-        if tree is not None or trials > 0:
-            raise SmcError("--verify LOG replays a recording's commands: give no tree or --trials")
+    kind = replay_command.replay_kind(
+        tree=tree,
+        trials=trials,
+        workers=workers,
+        cluster=cluster,
+        teach=teach,
+        script=script,
+        verify=verify,
+    )
+    if kind == "verify":
+        assert verify is not None
         print_verification(verify_log(verify))
         raise typer.Exit(0)
-    if tree is None:
-        raise SmcError("replay needs a tree file (or --verify LOG)")
-    if teach is not None and trials > 0:
-        raise SmcError("--teach continues one episode; it does not go with --trials")
-    if script is not None and teach is None:
-        raise SmcError("--script is the continuation of --teach script")
-    if cluster is not None and trials <= 0:
-        raise SmcError("--cluster runs a campaign's trials: give --trials N")
-    if cluster is not None and workers:
-        raise SmcError("--workers counts local processes; with --cluster the cluster's run")
-    drift = OdometryDrift(odometry_drift, odometry_drift) if odometry_drift > 0 else None
-    if trials > 0:
+    assert tree is not None
+    drift = replay_command.odometry_drift(odometry_drift)
+    if kind == "campaign":
         summary = _campaign_with_progress(
             tree,
             trials,
