@@ -113,7 +113,7 @@ def _print_summary(summary, scene: Scene) -> None:
     elif task.get("success") is False:
         warn(f"{summary.path}: the demonstration failed its task ({task.get('reason')})")
     if summary.interrupted is None:  # what compile will say about it, said now
-        from smccli.learn.compile import demonstration_warnings
+        from smccli.learn.chain import demonstration_warnings
 
         for warning in demonstration_warnings(summary.path, scene):
             warn(warning)
