@@ -112,14 +112,11 @@ def goal_from_object(
     object yaws a half turn apart, which put the offset on opposite sides of the centre.
     ``taught_yaw`` (the demonstrated cluster's yaw [rad]) settles that tie: the object yaw
     nearest it keeps the offset on the side it was taught, e.g. towards the camera when the
-    cluster's centre sits behind a bar handle (its posts pull it back). Without it the
-    tie went to whichever side the footprint's yaw wrapped to (3 cm off a handle).
+    cluster's centre sits behind a bar handle (its posts pull it back).
 
     ``yaw_ok`` (a goal ``[x, y, z, yaw]`` -> bool) leaves out goals the wrist reaches only
-    the long way round, past its limit (``CartesianController.wrist_short_way``): a box
-    held at yaw -1.5 and placed at -2.8 turned the hand a full turn inside the open box,
-    with both boxes; its equivalent 0.3 was 1.4 rad of wrist away. If none is left, as
-    without it.
+    the long way round, past its limit (``CartesianController.wrist_short_way``), which
+    would turn the hand a full turn with the object in it. If none is left, as without it.
     """
     base = object_yaw(cluster)
     period = cluster.yaw_period if cluster.yaw_period > 0 else math.pi
@@ -267,8 +264,8 @@ def map_goal(
                 raise SmcError(f"edge {edge}: a goal in the base's frame needs its pose")
             goal = compose(base, goal)
             # A pose of the hand relative to the base is a posture: the wrist ends as
-            # taught, not by the gripper's half turn, which swings the elbow elsewhere
-            # (measured: the tucked arm then hid the shelf from the head camera).
+            # taught, not by the gripper's half turn, which swings the elbow elsewhere (and
+            # the arm may then hide what the head camera must see).
             flip = False
         if flip:
             goal[3] = near(float(goal[3]), start[3], math.pi)
