@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 from conftest import smc
 
@@ -97,3 +99,54 @@ def test_warnings_and_errors_are_one_line_each_off_a_terminal(tmp_path, sample_t
         assert lines[-1].startswith(last)
         assert all(str(log) in ln or log.name in ln for ln in lines), lines
         assert any(len(ln) > 120 for ln in lines)
+
+
+def test_help_says_what_compile_and_doctor_read():
+    """compile and doctor read bags too (with --topics), and compile's --workers help gives
+    the number of logs below which compile stays in one process."""
+    from smccli.learn.compile import PARALLEL_MIN_LOGS
+
+    helps = {c: " ".join(smc(c, "--help").stdout.split()) for c in ("compile", "doctor")}
+    for text in helps.values():
+        assert "rosbag2 folder" in text and "ROS 1 .bag" in text, text
+    assert f"none below {PARALLEL_MIN_LOGS} logs" in helps["compile"], helps["compile"]
+
+
+REPLAY_OPTIONS = dict(
+    tree=Path("tree.json"), trials=0, workers=0, cluster=None, teach=None, script=None, verify=None
+)
+
+
+@pytest.mark.parametrize(
+    "options, kind",
+    [
+        ({}, "episode"),
+        ({"trials": 5}, "campaign"),
+        ({"trials": 5, "cluster": "tcp://h:8786"}, "campaign"),
+        ({"teach": "script", "script": Path("s.yaml")}, "episode"),
+        ({"tree": None, "verify": Path("demo.mcap")}, "verify"),
+    ],
+)
+def test_replay_kind_of_the_options(options, kind):
+    from smccli.execute.replay_command import replay_kind
+
+    assert replay_kind(**(REPLAY_OPTIONS | options)) == kind
+
+
+@pytest.mark.parametrize(
+    "options, needle",
+    [
+        ({"verify": Path("demo.mcap")}, "give no tree or --trials"),
+        ({"tree": None}, "needs a tree file"),
+        ({"teach": "script", "trials": 5}, "does not go with --trials"),
+        ({"script": Path("s.yaml")}, "continuation of --teach script"),
+        ({"cluster": "tcp://h:8786"}, "give --trials N"),
+        ({"cluster": "tcp://h:8786", "trials": 5, "workers": 2}, "--workers counts local"),
+    ],
+)
+def test_replay_refuses_options_that_mean_nothing(options, needle):
+    from smccli.errors import SmcError
+    from smccli.execute.replay_command import replay_kind
+
+    with pytest.raises(SmcError, match=needle):
+        replay_kind(**(REPLAY_OPTIONS | options))

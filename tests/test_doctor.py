@@ -19,10 +19,11 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Message
 from mcap.stream_reader import StreamReader
 
-from smccli.learn.doctor import copy_log, diagnose, exit_code, repair
+from smccli.learn.doctor import diagnose, exit_code, repair
 from smccli.logs import log_summary, strip_topic
 from smccli.logs import topics as tp
 from smccli.logs.records import RawLog, read_bytes, scan_records
+from smccli.logs.rewrite import copy_log
 
 DEMO = SAMPLE_LOGS / "pick_place" / "demo1.mcap"
 CHECKS = (

@@ -44,7 +44,8 @@ def test_folders_follow_the_pipeline() -> None:
     top = {p.stem for p in PACKAGE.glob("*.py")}
     assert top == {"__init__", "cli", "errors", "schemas", "outputs"}, top
     folders = {p.name for p in PACKAGE.iterdir() if p.is_dir() and (p / "__init__.py").exists()}
-    assert folders == set(ALLOWED), folders
+    # commands: cli.py's, one module per command; like cli.py they may import any stage.
+    assert folders == set(ALLOWED) | {"commands"}, folders
 
 
 def test_dependencies_point_down_the_pipeline() -> None:
@@ -180,11 +181,11 @@ def test_no_robot_constants_in_code() -> None:
 
 
 def test_library_does_not_print() -> None:
-    """Library modules return data; cli.py (and the bench scripts) print."""
+    """Library modules return data; cli.py and its commands (and the bench scripts) print."""
     offenders = []
     for path in PACKAGE.rglob("*.py"):
         rel = path.relative_to(PACKAGE)
-        if rel.parts[0] in ("cli.py", "bench"):
+        if rel.parts[0] in ("cli.py", "commands", "bench"):
             continue
         tree = ast.parse(path.read_text())
         for node in ast.walk(tree):

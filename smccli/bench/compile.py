@@ -126,7 +126,7 @@ OTHER_ACTIONS: dict[str, tuple[int, str]] = {
 
 
 def _chains(logs: list[Path]) -> list:
-    from smccli.learn.compile import extract_chain
+    from smccli.learn.chain import extract_chain
     from smccli.learn.params import SmcParams
     from smccli.learn.segmentation import SegmentMode
     from smccli.logs import read_log

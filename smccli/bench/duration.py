@@ -38,7 +38,8 @@ import numpy as np  # noqa: E402
 from smccli.bench.meta import machine  # noqa: E402
 from smccli.execute.campaign import run_campaign  # noqa: E402
 from smccli.execute.executor import speed_limit  # noqa: E402
-from smccli.learn.compile import compile_logs, fragments  # noqa: E402
+from smccli.learn.chain import fragments  # noqa: E402
+from smccli.learn.compile import compile_logs  # noqa: E402
 from smccli.learn.tree import Tree, load_tree  # noqa: E402
 from smccli.logs import read_log  # noqa: E402
 from smccli.outputs import check_output, write_atomic  # noqa: E402

@@ -318,7 +318,7 @@ def strip_trials(summary: dict[str, Any]) -> dict[str, Any]:
     return s
 
 
-def main(argv: list[str] | None = None) -> int:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="python -m smccli.bench.paper", description=__doc__.split("\n")[0]
     )
@@ -346,14 +346,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--out", type=Path, default=REPO / "docs", help="bench_results.json and img/*.png go here"
     )
-    args = ap.parse_args(argv)
-    check_output(args.out / "bench_results.json", force=True)  # before an hour of trials
+    return ap
 
-    results: dict[str, Any] = {
-        "command": "python -m smccli.bench.paper "
-        + " ".join(argv if argv is not None else sys.argv[1:]),
-        "machine": machine(),
-    }
+
+def _save(results: dict[str, Any], path: Path) -> None:
+    """Write what is measured so far: a crash later loses no campaign."""
+    write_atomic(path, json.dumps(results, indent=1, allow_nan=False) + "\n")
+
+
+def _bench_pick(args: argparse.Namespace, results: dict[str, Any]) -> list[dict[str, Any]]:
+    """Steps 1-2 into ``results``: bench_pick's tree, ranges, latency, match time, its
+    campaign, figures and targets. Returns the campaign's distance bands that had trials."""
     _log("compiling bench_pick's demonstration")
     tree_path = demo_tree("bench_pick", args.work)
     tree, scene = resolve(tree_path, None)
@@ -371,12 +374,6 @@ def main(argv: list[str] | None = None) -> int:
         fig10(summary, args.out / "img", "bench"),
     ]
     results["bench_pick"] = strip_trials(summary)
-    results_file = args.out / "bench_results.json"
-
-    def save() -> None:
-        """Write what is measured so far: a crash later loses no campaign."""
-        write_atomic(results_file, json.dumps(results, indent=1, allow_nan=False) + "\n")
-
     bands = [b for b in summary["by_band"] if b["trials"]]
     results["targets"] = {
         "success_rate>=0.99": summary["success_rate"] >= 0.99,
@@ -385,15 +382,13 @@ def main(argv: list[str] | None = None) -> int:
         "latency_p50<100ms": results["latency_serial_ms"]["p50"] < 100,
         "match_1000<1ms": results["match_1000_edges"]["vectorised_ms_p50"] < 1.0,
     }
-    save()
+    return bands
 
-    def demo_campaign(scene_name: str, trials: int) -> dict[str, Any]:
-        _log(f"compiling {scene_name}'s demonstrations")
-        tree = demo_tree(scene_name, args.work)
-        return campaign(scene_name, tree, trials, seed=args.seed, workers=args.workers)
 
-    noisy_tree = noisy_demo_tree(args.work) if args.variant_trials > 0 else Path()
-    for variant in VARIANTS if args.variant_trials > 0 else ():
+def _variants(args: argparse.Namespace, results: dict[str, Any], results_file: Path) -> None:
+    """Step 5 into ``results``: the realistic demonstration's tree in each variant scene."""
+    noisy_tree = noisy_demo_tree(args.work)
+    for variant in VARIANTS:
         scene_file = VARIANT_DIR / variant / "scene.yaml"
         _log(f"{variant}: the tree of the realistic demonstration in {scene_file}")
         s = campaign(
@@ -413,27 +408,35 @@ def main(argv: list[str] | None = None) -> int:
         results["targets"][f"{variant}_every_band>=0.97"] = all(
             b["success_rate"] >= 0.97 for b in vb
         )
-        save()
+        _save(results, results_file)
 
+
+def _other_campaigns(args: argparse.Namespace, results: dict[str, Any], results_file: Path) -> None:
+    """Steps 3-4 into ``results``: each scene's own sample demonstrations and campaign."""
     others = [("bench_pick_panda", args.panda_trials)]
     others += [(name, args.side_trials) for name in ("pick_place", "weigh_sort")]
     for scene_name, trials in others:
         if trials <= 0:
             continue
-        s = demo_campaign(scene_name, trials)
+        _log(f"compiling {scene_name}'s demonstrations")
+        tree = demo_tree(scene_name, args.work)
+        s = campaign(scene_name, tree, trials, seed=args.seed, workers=args.workers)
         s["profile"] = load_scene(scene_name).noise.profile
         if scene_name == "bench_pick_panda":
             results["figures"] += plots(s, args.out / "img", "bench_panda")
         results[scene_name] = strip_trials(s)
         results["targets"][f"{scene_name}>=0.99"] = s["success_rate"] >= 0.99
-        save()
-    results["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S")
-    save()
+        _save(results, results_file)
+
+
+def _print_results(
+    results: dict[str, Any], bands: list[dict[str, Any]], workers: int, results_file: Path
+) -> None:
     b = results["bench_pick"]
     print(
         f"bench_pick: {b['successes']}/{b['trials']} = {100 * b['success_rate']:.2f} % "
         f"(95 % CI {100 * b['ci95'][0]:.1f}-{100 * b['ci95'][1]:.1f}), "
-        f"{b['trials_per_second']:.2f} trials/s with {args.workers} workers"
+        f"{b['trials_per_second']:.2f} trials/s with {workers} workers"
     )
     for band in bands:
         print(f"  {band['label']:>12}: {band['successes']}/{band['trials']}")
@@ -446,6 +449,25 @@ def main(argv: list[str] | None = None) -> int:
             s = results[scene_name]
             print(campaign_line(f"{scene_name} ({s.get('profile', 'ideal')})", s))
     print(f"wrote {results_file}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    results_file = args.out / "bench_results.json"
+    check_output(results_file, force=True)  # before an hour of trials
+    results: dict[str, Any] = {
+        "command": "python -m smccli.bench.paper "
+        + " ".join(argv if argv is not None else sys.argv[1:]),
+        "machine": machine(),
+    }
+    bands = _bench_pick(args, results)
+    _save(results, results_file)
+    if args.variant_trials > 0:
+        _variants(args, results, results_file)
+    _other_campaigns(args, results, results_file)
+    results["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S")
+    _save(results, results_file)
+    _print_results(results, bands, args.workers, results_file)
     return 0
 
 

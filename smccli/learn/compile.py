@@ -1,9 +1,8 @@
-"""``smc compile``: demonstration logs -> SMC chains -> the tree (paper 3.1-3.8, Algorithm 1).
+"""``smc compile``: demonstration logs -> SMC chains -> the tree (paper 3.8, Algorithm 1).
 
-Per log, in order: read -> temporal saliency (fragments) -> perception saliency ->
-action saliency -> SMCs; then Algorithm 1 inserts the chain into the tree. Compile only
-perceives through the logged sensors (camera, scale, the robot's own joints for the
-self-filter); ``/sim/ground_truth`` is never read.
+Each log is read and its chain extracted (:mod:`smccli.learn.chain`), in worker processes or
+in this one; then Algorithm 1 inserts the chains into the tree one at a time, in the order
+the logs were given, and the tree is written atomically with a history entry.
 """
 
 from __future__ import annotations
@@ -20,57 +19,23 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from smccli import __version__
 from smccli.errors import LogError, SmcError, TreeError
-from smccli.learn.mobile import base_smcs, mobile_manipulator_smcs
+from smccli.learn.chain import Chain as Chain
+from smccli.learn.chain import demonstration_warnings as demonstration_warnings
+from smccli.learn.chain import extract_chain as extract_chain
+from smccli.learn.chain import fragments as fragments
+from smccli.learn.chain import required_topics as required_topics
+from smccli.learn.chain import scene_params as scene_params
 from smccli.learn.params import SmcParams, params_to_dict, with_overrides
-from smccli.learn.segmentation import (
-    Fragment,
-    SegmentMode,
-    fragment_commands,
-    segment,
-    trace_from_commands,
-)
-from smccli.learn.smc import (
-    Action,
-    SalientPerceptions,
-    Smc,
-    Source,
-    action_from_path,
-)
+from smccli.learn.segmentation import SegmentMode
+from smccli.learn.smc import Source
 from smccli.learn.tree import FORMAT, ROOT, Tree, digest, insert_chain, load_tree, save_tree
-from smccli.learn.trim import active_times, idle_centres
-from smccli.logs import Log, read_log
+from smccli.logs import read_log
 from smccli.logs import topics as tp
-from smccli.logs.robot import geometry_at, robot_model_of
 from smccli.logs.ros2_bag import ROLE_OF, ROLES, TopicMap, read_ros2_bag
 from smccli.outputs import ExclusiveLock, check_output
-from smccli.perception import Cluster, clusters_from_frame, salient_cluster, scale_reading
-from smccli.perception.params import scene_perception
-from smccli.perception.workspace import crop_warnings
-from smccli.world.robot import Robot
-from smccli.world.scene import Scene, robot_identity, scene_of_log, sensor_identity
-
-
-@dataclass(frozen=True, slots=True)
-class Chain:
-    """The SMCs extracted from one log, in time order."""
-
-    log: Path
-    """The log file."""
-    sha256: str
-    """Its sha256 (hex)."""
-    fragments: tuple[Fragment, ...]
-    """Temporal saliency: the fragments."""
-    smcs: tuple[Smc, ...]
-    """One SMC per fragment."""
-    warnings: tuple[str, ...]
-    """One-line warnings (truncated log, no boundary, no salient object...)."""
-    at: str | None = None
-    """Where the chain was taught during replay (``smc replay --teach``) and inserted; None:
-    a demonstration of the whole task, inserted at the root."""
+from smccli.world.scene import robot_identity, scene_of_log, sensor_identity
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,172 +50,6 @@ class CompileResult:
     """Logs already in the tree."""
     changed: bool
     """Whether the file was rewritten (version grew)."""
-
-
-def _finger_speed(log: Log, fingers: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-    """Largest speed of the gripper joints ``fingers`` over time, for settling the gripper
-    edges."""
-    t = np.array([js.t for js in log.joint_states], dtype=float)
-    if not log.joint_states:
-        return t, np.zeros(0)
-    names = log.joint_states[0].names
-    idx = [i for i, n in enumerate(names) if n in fingers]
-    if not idx:
-        return t, np.zeros(len(t))
-    vel = np.abs(np.array([js.velocity for js in log.joint_states])[:, idx]).max(axis=1)
-    return t, vel
-
-
-def fragments(
-    log: Log,
-    params: SmcParams,
-    mode: SegmentMode = SegmentMode.markers,
-    robot: Robot | None = None,
-) -> list[Fragment]:
-    """Temporal saliency (3.1) of a log: its fragments, as compile cuts them. ``robot``:
-    the log's (default: read from its attachments)."""
-    robot = robot or scene_of_log(log.attachments, log.path).robot
-    t_end = float(log.poi_t[-1]) if len(log.poi_t) else 0.0
-    t_f, v_f = _finger_speed(log, robot.gripper.joints if robot.gripper else ())
-    marks = tuple(m.t for m in log.marks if m.source == "operator")
-    trace = trace_from_commands(log.commands, t_f, v_f, log.weight_t, log.weight, marks, t_end)
-    return segment(
-        trace,
-        mode,
-        snap_window=params.snap_window,
-        min_fragment=params.min_fragment,
-        auto_gap=params.auto_gap,
-        idle=params.idle,
-    )
-
-
-def extract_chain(
-    log: Log, params: SmcParams, mode: SegmentMode, scene: Scene | None = None
-) -> Chain:
-    """Temporal, perception and action saliency of one log -> its SMC chain (eq. 40-42).
-    ``scene``: the log's (default: rebuilt from its attachments)."""
-    warnings: list[str] = []
-    name = log.path.name
-    scene = scene or scene_of_log(log.attachments, log.path)
-    if mode is SegmentMode.markers and not any(m.source == "operator" for m in log.marks):
-        warnings.append(
-            f"{name}: no saliency marks; the whole log is one fragment (try --segment auto)"
-        )
-    frags = fragments(log, params, mode, scene.robot)
-    if log.truncated or log.interrupted:
-        # Only what a boundary closed is a whole fragment: the rest was cut mid-action.
-        how = "truncated" if log.truncated else f"interrupted ({log.end.get('reason', '?')})"
-        t_end = float(log.poi_t[-1]) if len(log.poi_t) else 0.0
-        if frags[-1].cause == "end":
-            raise LogError(
-                f"{log.path}: {how} at t={t_end:.1f} s before its first fragment "
-                "boundary; no complete fragment to compile"
-            )
-        warnings.append(
-            f"{name}: {how} at t={t_end:.1f} s; compiled {len(frags)} complete "
-            f"fragment(s) up to t={frags[-1].t1:.1f} s, dropped the last "
-            f"{t_end - frags[-1].t1:.1f} s"
-        )
-    if scene.robot.base is not None:
-        smc_of = mobile_manipulator_smcs if scene.robot.arm_joints else base_smcs
-        return Chain(
-            log=log.path,
-            sha256=log.sha256,
-            fragments=tuple(frags),
-            smcs=tuple(smc_of(log, frags, scene, params, warnings)),
-            warnings=tuple(warnings),
-        )
-    robot = robot_model_of(log)
-    has_scale = len(log.weight) > 0
-    cut_faces: set[str] = set()
-    smcs: list[Smc] = []
-    held = 0.0  # symmetry of the object in the hand: nothing yet
-    for k, frag in enumerate(frags):
-        frame = log.frame_at(frag.t0)
-        if frame is None:
-            raise LogError(f"{name}: no camera frame near t={frag.t0:.2f} s")
-        clusters = clusters_from_frame(frame, geometry_at(robot, log, frame.t), params.perception)
-        warnings += crop_warnings(name, frame.t, clusters, params.perception, cut_faces)
-        poi_end = log.poi[int(np.argmin(np.abs(log.poi_t - frag.t1)))]
-        idx = salient_cluster(clusters, poi_end[:3], params.epsilon)
-        cluster = None if idx is None else clusters[idx]
-        weight = None
-        if has_scale:
-            weight = scale_reading(log.weight_t, log.weight, frag.t0, params.weight_window)
-        action = _action(log, frag, cluster, held, params)
-        if action.event == "close":  # what the hand holds from here on
-            held = cluster.yaw_period if cluster is not None else 0.0
-        elif action.event == "open":
-            held = 0.0
-        if cluster is None and action.event != "none":
-            warnings.append(
-                f"{name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends "
-                f"with no object within {params.epsilon} m of the POI; its goal "
-                "is stored in the world frame"
-            )
-        smcs.append(
-            Smc(perception=SalientPerceptions(cluster=cluster, weight=weight), action=action)
-        )
-    return Chain(
-        log=log.path,
-        sha256=log.sha256,
-        fragments=tuple(frags),
-        smcs=tuple(smcs),
-        warnings=tuple(warnings),
-    )
-
-
-def demonstration_warnings(path: Path, scene: Scene) -> tuple[str, ...]:
-    """What compile will warn about a demonstration just recorded in ``scene`` (an object
-    the crop box cuts, a fragment ending far from any object...), or the one line it would
-    refuse it with: said by ``smc record`` while the operator is still there."""
-    try:
-        log = read_log(path, topics=tp.READ_TOPICS, lazy_frames=True)
-        return extract_chain(log, scene_params(scene), SegmentMode.markers, scene).warnings
-    except SmcError as e:
-        return (f"compile would refuse it: {e}",)
-
-
-def _action(
-    log: Log, frag: Fragment, cluster: Cluster | None, held_symmetry: float, params: SmcParams
-) -> Action:
-    """Action saliency (3.4): the commanded POI path over the fragment as a DMP, its goal
-    and approach in the salient object's frame; ``held_symmetry`` is that of the object in
-    the hand (see :class:`smccli.learn.smc.Action`)."""
-    cmds = fragment_commands(log, frag)
-    t = np.array([c.t for c in cmds]) - cmds[0].t
-    path = np.array([c.target for c in cmds], dtype=float)
-    grip = np.array([c.gripper for c in cmds])
-    if params.idle.squeeze:  # the DMP and the gripper phase on the clock of the motion
-        idle = idle_centres(t, path, grip, None, params.idle)
-        t = active_times(t, idle, params.idle, keep=params.idle.keep)
-    return action_from_path(t, path, grip, cluster, params, held_symmetry=held_symmetry)
-
-
-def required_topics(log: Log, scene: Scene | None = None) -> set[str]:
-    """The topics compile needs in ``log`` (its scene's robot decides: an arm, a base, a
-    mobile manipulator; default: the scene the log carries, else an arm's)."""
-    if scene is None:  # doctor: the log's own scene, if it can be rebuilt
-        try:
-            scene = scene_of_log(log.attachments, log.path)
-        except LogError:
-            scene = None
-    if scene is not None and scene.robot.base is not None:
-        if scene.robot.arm_joints:  # a mobile manipulator: both, and its base pose
-            return set(tp.BASE_TOPICS | tp.ARM_TOPICS | {tp.BASE})
-        return set(tp.BASE_TOPICS)
-    needed = set(tp.ARM_TOPICS)
-    if log.metadata.get("has_scale") == "true":
-        needed.add("/scale/weight")
-    return needed
-
-
-def scene_params(scene: Scene, overrides: Sequence[str] = ()) -> SmcParams:
-    """The parameters a new tree of ``scene`` starts with: the defaults, the scene's
-    perception settings (scene.yaml ``perception``: a mobile manipulator's crop box in its
-    base's frame), then ``overrides`` (``--set``)."""
-    params = replace(SmcParams(), perception=scene_perception(scene))
-    return with_overrides(params, list(overrides))
 
 
 def _rebuild_base(out: Path) -> tuple[int, tuple[dict, ...]]:
@@ -313,10 +112,10 @@ class _Read:
     robot: dict[str, str] = field(default_factory=dict)
     """:func:`robot_identity`."""
     sensors: dict[str, Any] = field(default_factory=dict)
+    """:func:`sensor_identity`."""
     scene_files: dict[str, str] = field(default_factory=dict)
     """The scene's files as the log carries them (``scene.yaml``, ``scene.xml``,
     ``robot.yaml``): the tree keeps its first log's, to run where it was taught."""
-    """:func:`sensor_identity`."""
     scene_params: SmcParams | SmcError | None = None
     """With ``_Job.fresh``: :func:`scene_params` (or why not)."""
     params: SmcParams | None = None
@@ -403,7 +202,7 @@ SCENE_FILES = ("scene.yaml", "scene.xml", "robot.yaml")
 """The attachments that hold a log's scene (:func:`smccli.world.scene.scene_of_log`)."""
 PARALLEL_MIN_LOGS = 6
 """Fewer logs than this compile in process by default: starting workers costs about as
-much as reading five logs (measured: 2 logs take 1.6 s in workers, 0.8 s in process)."""
+much as reading five logs (``compile --workers`` help says so)."""
 
 
 def default_workers(n_logs: int) -> int:
@@ -431,9 +230,9 @@ def _pool(workers: int) -> ProcessPoolExecutor:
 WORKER_ENV = {"OPENBLAS_THREAD_TIMEOUT": "4"}
 """Environment of the worker processes, where the user has not set it. OpenBLAS's idle
 threads spin for 2**28 cycles (~0.1 s) after every call before they sleep; with a worker
-per core, each one's spinning threads take the others' cores (20 demos: 12.5 s instead of
-6.5 s on 2 cores). With 2**4 they sleep at once. The DMP fit runs on one BLAS thread
-wherever it runs (smccli/learn/dmp.py), so the tree does not depend on the thread count."""
+per core, each one's spinning threads take the others' cores. With 2**4 they sleep at
+once. The DMP fit runs on one BLAS thread wherever it runs (smccli/learn/dmp.py), so the
+tree does not depend on the thread count."""
 
 
 @contextlib.contextmanager
@@ -463,6 +262,212 @@ def _same(a: SmcParams, b: SmcParams) -> bool:
     return params_to_dict(a, full=True) == params_to_dict(b, full=True)
 
 
+@dataclass(slots=True)
+class _Growing:
+    """A compile under way: the tree as Algorithm 1 grows it, one chain at a time, and what
+    was added or skipped so far."""
+
+    out: Path
+    """The tree file."""
+    tree: Tree
+    fresh: bool
+    """The tree is new (absent, or ``--rebuild``): its first log's scene sets its
+    perception settings."""
+    overrides: tuple[str, ...]
+    segment_mode: SegmentMode
+    topic_map: TopicMap | None
+    strict: bool
+    known: frozenset[str]
+    """Digests of the logs in the tree before this compile."""
+    added: list[Chain] = field(default_factory=list)
+    """Chains inserted, in order (``at``: where a taught one went)."""
+    layouts: dict[str, dict[str, list[float]]] = field(default_factory=dict)
+    """Log digest -> its recorded layout (:func:`parse_layout`)."""
+    skipped: list[Path] = field(default_factory=list)
+
+    def job(self, path: Path) -> _Job:
+        """The job as the tree stands now: in process, exactly a sequential compile's."""
+        return _Job(
+            path,
+            self.tree.params,
+            self.fresh and not self.added,
+            self.overrides,
+            self.segment_mode,
+            self.known | {c.sha256 for c in self.added},
+            self.topic_map,
+            self.strict,
+        )
+
+    def has(self, sha256: str) -> bool:
+        """Whether the log of this digest is in the tree already (before or by this compile)."""
+        return sha256 in self.known or any(c.sha256 == sha256 for c in self.added)
+
+
+def _lock(out: Path) -> ExclusiveLock:
+    """The tree's lock, held: one compile at a time writes ``out``."""
+    lock = ExclusiveLock(f"{out}.lock")
+    try:
+        lock.acquire(timeout=60)
+    except TimeoutError:
+        raise TreeError(f"{out}: locked by another compile ({out}.lock)") from None
+    return lock
+
+
+def _open_tree(out: Path, rebuild: bool, overrides: Sequence[str]) -> tuple[Tree, bool]:
+    """The tree the logs go into and whether it is fresh: the one at ``out``, whose
+    parameters ``overrides`` must not change; else (absent, or ``rebuild``) a new one that
+    keeps the version growing and the history of any tree it replaces."""
+    if out.exists() and not rebuild:
+        tree = load_tree(out)
+        wanted = with_overrides(tree.params, list(overrides))
+        if params_to_dict(wanted) != params_to_dict(tree.params):
+            raise TreeError(
+                f"{out}: --set {' '.join(overrides)} differs from the tree's "
+                "parameters; use --rebuild to start afresh"
+            )
+        return tree, False
+    version, history = _rebuild_base(out) if out.exists() else (0, ())
+    params = with_overrides(SmcParams(), list(overrides))
+    return Tree(params=params, version=version, history=history), True
+
+
+@contextlib.contextmanager
+def _reading(
+    paths: Sequence[Path], n_workers: int, job: Callable[[Path], _Job]
+) -> Iterator[Callable[[int], _Read]]:
+    """``read(i)``: the ``i``-th log read and extracted. With several workers and logs, all
+    are submitted at once, as the tree stands before the first log (a chain extracted with
+    other parameters than the tree has when its turn comes is extracted again, in process);
+    else each is read in process when asked, as the tree stands then. On leaving after an
+    error, the logs still queued are dropped and those being read finish."""
+    if n_workers <= 1 or len(paths) <= 1:
+        yield lambda i: _read(job(paths[i]))
+        return
+    pool = _pool(n_workers)
+    try:
+        with _worker_env():  # the workers start on the first submits
+            futures = [pool.submit(_read, job(p)) for p in paths]
+        yield lambda i: _result(futures[i], paths[i])
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _check_fits(tree: Tree, r: _Read, path: Path) -> None:
+    """LogError unless the log ``r`` fits ``tree``: its scene's model compiles, it was
+    recorded with the tree's robot and in the tree's scene."""
+    if r.model_error is not None:
+        raise r.model_error
+    robot = r.robot
+    if tree.robot and tree.robot != robot:
+        raise LogError(
+            f"{path}: recorded with robot {robot['name']!r} "
+            f"(kinematics {robot['kinematics'][7:19]}), the tree was taught on "
+            f"{tree.robot.get('name')!r} ({str(tree.robot.get('kinematics'))[7:19]})"
+        )
+    if tree.scene and r.metadata.get("scene") not in (None, tree.scene.get("name")):
+        raise LogError(
+            f"{path}: scene {r.metadata.get('scene')!r} differs from the "
+            f"tree's scene {tree.scene.get('name')!r}"
+        )
+
+
+def _chain(g: _Growing, r: _Read, path: Path) -> Chain:
+    """The chain of log ``r``, extracted with the tree's parameters (again, in process, if
+    a worker extracted it with others)."""
+    if r.params is None or not _same(r.params, g.tree.params):
+        r = _read(replace(g.job(path), fresh=False, known=frozenset()))
+    if isinstance(r.chain, SmcError):
+        raise r.chain
+    assert r.chain is not None  # extracted: not known, no error
+    return r.chain
+
+
+def _insert(
+    tree: Tree, chain: Chain, r: _Read, path: Path, out: Path, warn: Callable[[str], None]
+) -> Tree:
+    """Algorithm 1: ``chain`` inserted at the root, or a continuation taught during replay
+    (``smc replay --teach``) at the node where no SMC was contingent; the first log's scene
+    and robot become the tree's."""
+    sources = [Source(log=path.name, sha256=r.sha256, t0=f.t0, t1=f.t1) for f in chain.fragments]
+    at = r.metadata.get("teach_node") or ROOT
+    if at not in tree.nodes:
+        raise LogError(
+            f"{path}: taught at node {at} of tree {r.metadata.get('teach_tree', '?')}; "
+            f"{out} has no such node"
+        )
+    if at != ROOT and r.metadata.get("teach_tree_digest") != digest(tree):
+        warn(
+            f"{path}: taught on another version of the tree (digest "
+            f"{r.metadata.get('teach_tree_digest', '?')[:19]}); inserted at {at}"
+        )
+    tree = insert_chain(tree, chain.smcs, sources, at=at)
+    if tree.scene:
+        return tree
+    scene = {
+        "name": r.metadata.get("scene", ""),
+        "digest": r.metadata.get("scene_digest", ""),
+        "log": r.sha256,
+        "sensors": r.sensors,
+        "files": r.scene_files,
+        **({"path": r.metadata["scene_path"]} if r.metadata.get("scene_path") else {}),
+    }
+    return replace(tree, scene=scene, robot=r.robot)
+
+
+def _add(
+    g: _Growing,
+    r: _Read,
+    path: Path,
+    on_progress: Callable[[Path, str], None] | None,
+    warn: Callable[[str], None],
+) -> None:
+    """One log's turn: refused (its error), skipped (in the tree already) or its chain
+    inserted into ``g.tree``."""
+    for w in r.warnings:
+        warn(w)
+    if r.error is not None:
+        raise r.error
+    if g.has(r.sha256):
+        g.skipped.append(path)
+        return
+    _check_fits(g.tree, r, path)
+    if g.fresh and not g.added:  # a new tree takes its scene's perception settings, then --set
+        if isinstance(r.scene_params, SmcError):
+            raise r.scene_params
+        assert r.scene_params is not None  # computed for every fresh job
+        g.tree = replace(g.tree, params=r.scene_params)
+    if on_progress:
+        on_progress(path, "extracting")
+    chain = _chain(g, r, path)
+    for w in chain.warnings:
+        warn(w)
+    g.tree = _insert(g.tree, chain, r, path, g.out, warn)
+    g.added.append(replace(chain, at=r.metadata.get("teach_node")))
+    layout = parse_layout(r.metadata.get("layout"))
+    if layout is not None:
+        g.layouts[chain.sha256] = layout
+
+
+def _history_entry(g: _Growing) -> dict[str, Any]:
+    """The tree's history entry for this compile: the new version, when, which smc, and
+    each log added (its fragments, where a taught one went, its recorded layout)."""
+    return {
+        "version": g.tree.version + 1,
+        "time": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+        "smc_version": __version__,
+        "logs": [
+            {
+                "name": c.log.name,
+                "sha256": c.sha256,
+                "fragments": len(c.smcs),
+                **({"at": c.at} if c.at is not None else {}),
+                **({"layout": g.layouts[c.sha256]} if c.sha256 in g.layouts else {}),
+            }
+            for c in g.added
+        ],
+    }
+
+
 def compile_logs(
     logs: Sequence[Path],
     out: Path,
@@ -483,10 +488,10 @@ def compile_logs(
     With ``topic_map`` the logs are ROS 2 bags read through it
     (:func:`smccli.logs.ros2_bag.read_ros2_bag`).
 
-    ``workers`` processes (default: one per CPU, at most one per log; 1: in this process)
-    read the logs and extract their chains in parallel; the tree takes them in the order
-    given (Algorithm 1 is sequential), so the tree, the warnings and the first error are
-    those of a one-log-at-a-time compile.
+    ``workers`` processes (default: :func:`default_workers`; 1: in this process) read the
+    logs and extract their chains in parallel; the tree takes them in the order given
+    (Algorithm 1 is sequential), so the tree, the warnings and the first error are those
+    of a one-log-at-a-time compile.
 
     A demonstration whose recorder found it failed its task (the log's ``smc_end``) is
     compiled with a warning, or refused with ``strict``.
@@ -499,158 +504,32 @@ def compile_logs(
     # before reading any log is that it can be written at all.
     out = check_output(out, force=True)
     warn = on_warning or (lambda msg: None)
-    lock = ExclusiveLock(f"{out}.lock")
+    lock = _lock(out)
     try:
-        lock.acquire(timeout=60)
-    except TimeoutError:
-        raise TreeError(f"{out}: locked by another compile ({out}.lock)") from None
-    pool = None
-    try:
-        fresh = not (out.exists() and not rebuild)
-        # A new tree takes its scene's perception settings (scene.yaml), then --set.
-        if not fresh:
-            tree = load_tree(out)
-            wanted = with_overrides(tree.params, list(overrides))
-            if params_to_dict(wanted) != params_to_dict(tree.params):
-                raise TreeError(
-                    f"{out}: --set {' '.join(overrides)} differs from the tree's "
-                    "parameters; use --rebuild to start afresh"
-                )
-        else:
-            # A rebuild starts a new tree but keeps the version growing and the history.
-            version, history = _rebuild_base(out) if out.exists() else (0, ())
-            tree = Tree(
-                params=with_overrides(SmcParams(), list(overrides)),
-                version=version,
-                history=history,
-            )
-        known = tree.log_digests()
-        added: list[Chain] = []
-        layouts: dict[str, dict[str, list[float]]] = {}
-        skipped: list[Path] = []
-
-        def job(path: Path) -> _Job:
-            """The job as the tree stands now: in process, exactly a sequential compile's."""
-            return _Job(
-                path,
-                tree.params,
-                fresh and not added,
-                tuple(overrides),
-                segment_mode,
-                frozenset(known) | {c.sha256 for c in added},
-                topic_map,
-                strict,
-            )
-
-        futures: list[Future[_Read]] = []
-        if n_workers > 1 and len(paths) > 1:
-            # Submitted as the tree stands before the first log; a chain extracted with
-            # other parameters than the tree has when its turn comes (a new tree whose
-            # logs' scenes differ in perception settings) is extracted again, in process.
-            pool = _pool(n_workers)
-            with _worker_env():  # the workers start on the first submits
-                futures = [pool.submit(_read, job(p)) for p in paths]
-        for i, path in enumerate(paths):
-            if on_progress:
-                on_progress(path, "reading")
-            r = _result(futures[i], path) if futures else _read(job(path))
-            for w in r.warnings:
-                warn(w)
-            if r.error is not None:
-                raise r.error
-            if r.sha256 in known or any(c.sha256 == r.sha256 for c in added):
-                skipped.append(path)
-                continue
-            if r.model_error is not None:
-                raise r.model_error
-            robot = r.robot
-            if tree.robot and tree.robot != robot:
-                raise LogError(
-                    f"{path}: recorded with robot {robot['name']!r} "
-                    f"(kinematics {robot['kinematics'][7:19]}), the tree was taught on "
-                    f"{tree.robot.get('name')!r} ({str(tree.robot.get('kinematics'))[7:19]})"
-                )
-            if tree.scene and r.metadata.get("scene") not in (None, tree.scene.get("name")):
-                raise LogError(
-                    f"{path}: scene {r.metadata.get('scene')!r} differs from the "
-                    f"tree's scene {tree.scene.get('name')!r}"
-                )
-            if fresh and not added:
-                if isinstance(r.scene_params, SmcError):
-                    raise r.scene_params
-                assert r.scene_params is not None  # computed for every fresh job
-                tree = replace(tree, params=r.scene_params)
-            if on_progress:
-                on_progress(path, "extracting")
-            if r.params is None or not _same(r.params, tree.params):
-                r = _read(replace(job(path), fresh=False, known=frozenset()))
-            if isinstance(r.chain, SmcError):
-                raise r.chain
-            chain = r.chain
-            assert chain is not None  # extracted: not known, no error
-            for w in chain.warnings:
-                warn(w)
-            sources = [
-                Source(log=path.name, sha256=r.sha256, t0=f.t0, t1=f.t1) for f in chain.fragments
-            ]
-            # A continuation taught during replay (smc replay --teach) grows the tree from
-            # the node where no SMC was contingent.
-            taught = r.metadata.get("teach_node")
-            at = taught or ROOT
-            if at not in tree.nodes:
-                raise LogError(
-                    f"{path}: taught at node {at} of tree {r.metadata.get('teach_tree', '?')}; "
-                    f"{out} has no such node"
-                )
-            if at != ROOT and r.metadata.get("teach_tree_digest") != digest(tree):
-                warn(
-                    f"{path}: taught on another version of the tree (digest "
-                    f"{r.metadata.get('teach_tree_digest', '?')[:19]}); inserted at {at}"
-                )
-            tree = insert_chain(tree, chain.smcs, sources, at=at)
-            if not tree.scene:
-                tree = replace(
-                    tree,
-                    scene={
-                        "name": r.metadata.get("scene", ""),
-                        "digest": r.metadata.get("scene_digest", ""),
-                        "log": r.sha256,
-                        "sensors": r.sensors,
-                        "files": r.scene_files,
-                        **(
-                            {"path": r.metadata["scene_path"]}
-                            if r.metadata.get("scene_path")
-                            else {}
-                        ),
-                    },
-                    robot=robot,
-                )
-            added.append(replace(chain, at=taught))
-            layout = parse_layout(r.metadata.get("layout"))
-            if layout is not None:
-                layouts[chain.sha256] = layout
-        if not added:
-            return CompileResult(tree=tree, added=(), skipped=tuple(skipped), changed=False)
-        entry = {
-            "version": tree.version + 1,
-            "time": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-            "smc_version": __version__,
-            "logs": [
-                {
-                    "name": c.log.name,
-                    "sha256": c.sha256,
-                    "fragments": len(c.smcs),
-                    **({"at": c.at} if c.at is not None else {}),
-                    **({"layout": layouts[c.sha256]} if c.sha256 in layouts else {}),
-                }
-                for c in added
-            ],
-        }
-        tree = replace(tree, version=tree.version + 1, history=(*tree.history, entry))
-        save_tree(tree, out)
-        return CompileResult(tree=tree, added=tuple(added), skipped=tuple(skipped), changed=True)
+        tree, fresh = _open_tree(out, rebuild, overrides)
+        g = _Growing(
+            out,
+            tree,
+            fresh,
+            tuple(overrides),
+            segment_mode,
+            topic_map,
+            strict,
+            frozenset(tree.log_digests()),
+        )
+        with _reading(paths, n_workers, g.job) as read:
+            for i, path in enumerate(paths):
+                if on_progress:
+                    on_progress(path, "reading")
+                _add(g, read(i), path, on_progress, warn)
+        if not g.added:
+            return CompileResult(tree=g.tree, added=(), skipped=tuple(g.skipped), changed=False)
+        g.tree = replace(
+            g.tree, version=g.tree.version + 1, history=(*g.tree.history, _history_entry(g))
+        )
+        save_tree(g.tree, out)
+        return CompileResult(
+            tree=g.tree, added=tuple(g.added), skipped=tuple(g.skipped), changed=True
+        )
     finally:
-        if pool is not None:
-            # After an error: the logs still queued are dropped, those being read finish.
-            pool.shutdown(wait=True, cancel_futures=True)
         lock.release()

@@ -213,7 +213,7 @@ def fit(
     e = c - np.outer(min_jerk(s), c[-1])
     g = _integrate(np.eye(params.n_basis), params, s)
     # One BLAS thread: OpenBLAS splits a product and a solve by its thread count, which
-    # changes the weights' last bits (measured: from the 8th digit), so a tree would depend
+    # changes the weights' last bits (from the 8th digit), so a tree would depend
     # on the machine's cores and on OPENBLAS_NUM_THREADS (Dask sets it to 1 in the
     # process that starts its workers). One thread is no slower at this size (n_basis^2).
     with threadpool_limits(limits=1, user_api="blas"):

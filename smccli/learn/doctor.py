@@ -8,17 +8,15 @@ saliency marks and fragments) and never raises for a bad log. Statuses:
 - ``warn``: compile accepts it, but look (truncated, no marks, interrupted, damaged index…);
 - ``ok``.
 
-``repair(src, out)`` rewrites what a truncated file holds (every record of every whole
-chunk, e.g. a killed recorder's ``NAME.mcap.part``) as a valid, indexed MCAP.
+The bytes are walked by :mod:`smccli.learn.mcap_layout`; ``repair(src, out)``
+(:mod:`smccli.learn.repair`) rewrites what a truncated file holds as a valid, indexed MCAP.
 """
 
 from __future__ import annotations
 
-import io
 import json
 import math
 import os
-import zlib
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,27 +24,23 @@ from typing import Any, Literal
 
 import numpy as np
 from google.protobuf.descriptor import FieldDescriptor
-from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
-from mcap.records import Attachment, Channel, Chunk, Footer, Statistics
-from mcap.stream_reader import CRCValidationError, get_chunk_data_stream
+from mcap.records import Channel
 
-from smccli.errors import LogError, OutputError, SmcError
+from smccli.errors import SmcError
+from smccli.learn.mcap_layout import MAGIC, Layout, record_layout
+from smccli.learn.repair import RepairResult as RepairResult
+from smccli.learn.repair import repair as repair
 from smccli.logs import topics as tp
 from smccli.logs.decode import decode_points
 from smccli.logs.log import Log, parse_task
 from smccli.logs.reader import read_log
 from smccli.logs.records import RawLog, read_bytes, scan_records
-from smccli.logs.rewrite import copy_log
 from smccli.logs.ros2_bag import ROLE_OF, ROLES, TopicMap, read_ros2_bag, resolve_bag
-from smccli.outputs import check_output, write_atomic
 
 Status = Literal["ok", "warn", "error"]
 
 _RANK: dict[str, int] = {"ok": 0, "warn": 1, "error": 2}
-_MAGIC = b"\x89MCAP0\r\n"
-_HEAD = 9
-"""Bytes before a record's body: opcode (1) + length (8)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,151 +68,9 @@ class Diagnosis:
     """The worst status among ``checks``."""
 
 
-@dataclass(frozen=True, slots=True)
-class RepairResult:
-    """What ``repair`` wrote."""
-
-    path: Path
-    """The repaired log."""
-    messages: int
-    """Messages copied: every message of every whole chunk of the source, in file order."""
-    chunks: int
-    """Whole chunks found in the source."""
-    truncated: bool
-    """Whether the source was truncated (False: it was complete and has just been copied)."""
-    source_bytes: int
-    """Size of the source [bytes]."""
-
-
 def exit_code(diagnoses: Iterable[Diagnosis]) -> int:
     """0 if every log is healthy, 1 if there are warnings only, 2 if a log is unusable."""
     return max((_RANK[d.status] for d in diagnoses), default=0)
-
-
-# --- the bytes: record layout and CRCs, in one pass that survives damage ---
-
-
-@dataclass(frozen=True, slots=True)
-class _Layout:
-    """Where a file's records lie and which CRCs match."""
-
-    chunks: int
-    """Whole chunk records."""
-    crcs: int
-    """Non-zero CRCs checked."""
-    bad_data: tuple[str, ...]
-    """Damage the reader rejects: chunk CRC or decompression, data section CRC."""
-    bad_other: tuple[str, ...]
-    """Damage compile does not see: attachment and summary CRCs."""
-    footer: Footer | None
-    """The footer, None when the file ends before it (truncated)."""
-    end: int
-    """Byte offset just after the last whole record."""
-    torn: int | None
-    """Offset of the record cut by the end of the file, if one is."""
-    torn_opcode: int | None
-    """Opcode of that record (None if even its 9-byte head is cut)."""
-    chunk_indexes: int
-    """Chunk index records in the summary."""
-    statistics: Statistics | None
-    """The summary's statistics record, if any."""
-    closing_magic: bool
-    """Whether the magic bytes follow the footer."""
-
-
-def _read(cls: Any, body: bytes) -> Any:
-    return cls.read(ReadDataStream(io.BytesIO(body)))
-
-
-def _chunk_problem(body: bytes) -> tuple[str | None, bool]:
-    """(problem or None, whether a CRC was checked) for one chunk record's body."""
-    try:
-        chunk = _read(Chunk, body)
-        get_chunk_data_stream(chunk, validate_crc=True)
-    except CRCValidationError as e:
-        return f"CRC mismatch (stored {e.expected:#010x}, computed {e.actual:#010x})", True
-    except Exception as e:  # any codec or framing failure means the chunk is unreadable
-        return f"unreadable ({type(e).__name__}: {e})", False
-    return None, chunk.uncompressed_crc != 0
-
-
-def _layout(data: bytes) -> _Layout:
-    """Walk the records after the opening magic without trusting any of them."""
-    off, n = len(_MAGIC), len(data)
-    chunks = crcs = indexes = 0
-    bad_data: list[str] = []
-    bad_other: list[str] = []
-    footer: Footer | None = None
-    stats: Statistics | None = None
-    torn: int | None = None
-    torn_op: int | None = None
-    while off < n:
-        if off + _HEAD > n:
-            torn = off
-            break
-        opcode = data[off]
-        end = off + _HEAD + int.from_bytes(data[off + 1 : off + _HEAD], "little")
-        if end > n:
-            torn, torn_op = off, opcode
-            break
-        body = data[off + _HEAD : end]
-        if opcode == Opcode.CHUNK:
-            chunks += 1
-            problem, checked = _chunk_problem(body)
-            crcs += checked
-            if problem:
-                bad_data.append(f"chunk {chunks} at byte {off}: {problem}")
-        elif opcode == Opcode.ATTACHMENT and len(body) >= 4:
-            stored = int.from_bytes(body[-4:], "little")
-            if stored:
-                crcs += 1
-                if zlib.crc32(body[:-4]) != stored:
-                    name = _attachment_name(body)
-                    bad_other.append(f"attachment {name} at byte {off}: CRC mismatch")
-        elif opcode == Opcode.DATA_END and len(body) >= 4:
-            stored = int.from_bytes(body[:4], "little")
-            if stored:  # 0 = not computed (the Python mcap writer leaves it 0)
-                crcs += 1
-                if zlib.crc32(data[:off]) != stored:
-                    bad_data.append("data section: CRC mismatch")
-        elif opcode == Opcode.CHUNK_INDEX:
-            indexes += 1
-        elif opcode == Opcode.STATISTICS:
-            try:
-                stats = _read(Statistics, body)
-            except Exception:  # a damaged statistics record is reported as missing
-                stats = None
-        elif opcode == Opcode.FOOTER:
-            footer = _read(Footer, body)
-            if footer.summary_crc:
-                crcs += 1
-                start = footer.summary_start or off
-                # The CRC covers the summary through the footer's summary_offset_start field.
-                if zlib.crc32(data[start : off + _HEAD + 16]) != footer.summary_crc:
-                    bad_other.append("summary: CRC mismatch")
-            off = end
-            break
-        off = end
-    return _Layout(
-        chunks=chunks,
-        crcs=crcs,
-        bad_data=tuple(bad_data),
-        bad_other=tuple(bad_other),
-        footer=footer,
-        end=off,
-        torn=torn,
-        torn_opcode=torn_op,
-        chunk_indexes=indexes,
-        statistics=stats,
-        closing_magic=footer is not None and data[off : off + len(_MAGIC)] == _MAGIC,
-    )
-
-
-def _attachment_name(body: bytes) -> str:
-    try:
-        return str(_read(Attachment, body).name)
-    except Exception:  # the name itself may be what is damaged
-        return "?"
 
 
 # --- the checks ---
@@ -230,7 +82,7 @@ class _Context:
 
     path: Path
     data: bytes
-    layout: _Layout
+    layout: Layout
     raw: RawLog | None = None
     log: Log | None = None
     read_error: str = ""
@@ -452,9 +304,9 @@ def _counts(raw: RawLog) -> dict[int, int]:
 
 
 def _check_topics(c: _Context) -> Check:
-    # compile pulls in open3d and MuJoCo (1.4-2.4 s, measured): only for a log that gets
-    # this far, so a damaged file is reported at once.
-    from smccli.learn.compile import required_topics
+    # learn.chain pulls in open3d and MuJoCo (seconds of imports): only for a log that
+    # gets this far, so a damaged file is reported at once.
+    from smccli.learn.chain import required_topics
 
     assert c.log is not None
     needed = sorted(required_topics(c.log))
@@ -572,7 +424,7 @@ def _check_numbers(c: _Context) -> Check:
 
 
 def _check_saliency(c: _Context) -> Check:
-    from smccli.learn.compile import fragments  # open3d, MuJoCo: see _check_topics
+    from smccli.learn.chain import fragments  # open3d, MuJoCo: see _check_topics
     from smccli.learn.params import SmcParams
 
     assert c.log is not None
@@ -599,7 +451,7 @@ def _check_saliency(c: _Context) -> Check:
 def _check_smcs(c: _Context) -> Check:
     """What compile extracts from the log with its scene's parameters (a fresh tree): an
     SMC per fragment, or the error compile would stop on."""
-    from smccli.learn.compile import extract_chain, scene_params
+    from smccli.learn.chain import extract_chain, scene_params
     from smccli.learn.segmentation import SegmentMode
     from smccli.world.scene import scene_of_log
 
@@ -651,12 +503,12 @@ def diagnose(path: str | os.PathLike[str], topic_map: TopicMap | None = None) ->
         data = read_bytes(path)
     except SmcError as e:
         return _diagnosis(path, [Check("file", "error", _one_line(path, str(e)))])
-    if not data.startswith(_MAGIC):
+    if not data.startswith(MAGIC):
         why = f"not an MCAP file (starts with {data[:8]!r}, {len(data)} bytes)"
         return _diagnosis(path, [Check("file", "error", why)])
     if topic_map is not None:
         return _diagnose_bag(path, data, topic_map)
-    c = _Context(path=path, data=data, layout=_layout(data))
+    c = _Context(path=path, data=data, layout=record_layout(data))
     try:
         c.raw = scan_records(path, data)
     except SmcError as e:
@@ -685,7 +537,9 @@ def _diagnose_bag(path: Path, data: bytes | None, topic_map: TopicMap) -> Diagno
     bag's storage is checked by ``rosbags`` as it reads it), then reading it through the
     map (topics present and of the mapped types, decoding, transforms), then what compile
     needs (topics, marks, the SMCs it extracts)."""
-    c = _Context(path=path, data=data or b"", layout=_layout(data or b""), topic_map=topic_map)
+    c = _Context(
+        path=path, data=data or b"", layout=record_layout(data or b""), topic_map=topic_map
+    )
     try:
         c.log = read_ros2_bag(path, topic_map, on_warning=c.warnings.append)
     except SmcError as e:
@@ -708,57 +562,3 @@ def _diagnose_bag(path: Path, data: bytes | None, topic_map: TopicMap) -> Diagno
 def _diagnosis(path: Path, checks: list[Check]) -> Diagnosis:
     worst = max(checks, key=lambda ch: _RANK[ch.status]).status
     return Diagnosis(path=path, checks=tuple(checks), status=worst)
-
-
-# --- repair ---
-
-
-def _same_file(a: Path, b: Path) -> bool:
-    if a.exists() and b.exists():
-        return os.path.samefile(a, b)
-    return a.resolve() == b.resolve()
-
-
-def repair(
-    src: str | os.PathLike[str], out: str | os.PathLike[str], *, force: bool = False
-) -> RepairResult:
-    """Write every whole chunk of ``src`` (e.g. a killed recorder's ``.mcap.part``) to
-    ``out`` as a valid, indexed MCAP, atomically; ``src`` is only read.
-
-    A complete ``src`` is simply copied. Raises OutputError if ``out`` is ``src``,
-    OutputExistsError if it exists without ``force``, LogError if ``src`` is not an MCAP
-    file or a chunk before the cut is damaged.
-    """
-    src, out = Path(src), Path(out)
-    if _same_file(src, out):
-        raise OutputError(f"{out}: is the log being repaired; write the repair elsewhere")
-    check_output(out, force=force)
-    data = read_bytes(src)
-    try:
-        raw = scan_records(src, data)
-    except SmcError:
-        raise
-    except Exception as e:  # e.g. zstd's own error on a damaged chunk, which the reader lets by
-        raise LogError(f"{src}: corrupt MCAP ({type(e).__name__}: {e})") from None
-    extra: dict[str, dict[str, str]] = {}
-    if raw.truncated and tp.END_METADATA_NAME not in raw.metadata:
-        # The repaired log says it was cut short, as a SIGINT-ended recording does, so
-        # compile keeps only its complete fragments and doctor warns.
-        last = max((m.log_time for m in raw.messages), default=0)
-        extra[tp.END_METADATA_NAME] = {
-            "end": "interrupted",
-            "reason": f"truncated at byte {raw.cut_at}; repaired by smc doctor",
-            "last_log_time_s": f"{last / 1e9:.3f}",
-        }
-    buf = io.BytesIO()
-    n = copy_log(raw, buf, extra_metadata=extra)
-    # write_atomic's temp name is unique: `smc doctor X.mcap.part --repair X.mcap` must not
-    # write X.mcap.part, the very file being repaired.
-    write_atomic(out, buf.getvalue())
-    return RepairResult(
-        path=out,
-        messages=n,
-        chunks=_layout(data).chunks,
-        truncated=raw.truncated,
-        source_bytes=len(data),
-    )

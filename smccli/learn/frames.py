@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
@@ -41,11 +41,40 @@ from smccli.world.geometry import (
     wrap_yaw,
 )
 
-if TYPE_CHECKING:
-    from smccli.learn.smc import Action
 
-FRAMES = ("world", "object", "scan", "hand", "base")
-"""Where an action's goal may be stored (``Action.goal_frame``)."""
+class Action(Protocol):
+    """What mapping a goal back reads of an action: the fields of
+    :class:`smccli.learn.smc.Action` of the same names (that module stores goals with this
+    one's functions, so this one names the fields instead of importing the class)."""
+
+    @property
+    def goal_frame(self) -> str:
+        """``world``, ``object``, ``scan``, ``hand`` or ``base``."""
+
+    @property
+    def goal(self) -> np.ndarray:
+        """The goal in ``goal_frame``, shape (4,) [m, rad]."""
+
+    @property
+    def poi(self) -> str | None:
+        """``hand``, ``base`` or None (a robot with one POI)."""
+
+    @property
+    def symmetry(self) -> float:
+        """Yaw symmetry of the goal's frame [rad]."""
+
+    @property
+    def held_symmetry(self) -> float:
+        """Yaw symmetry of the object held [rad]."""
+
+    @property
+    def base_goal(self) -> np.ndarray | None:
+        """A mobile manipulator's base goal in ``goal_frame``, shape (4,)."""
+
+    @property
+    def hand_yaw(self) -> float | None:
+        """With ``goal_frame == "hand"``: the hand's yaw on its base as taught [rad]."""
+
 
 # --- object ----------------------------------------------------------------------------
 
@@ -83,14 +112,11 @@ def goal_from_object(
     object yaws a half turn apart, which put the offset on opposite sides of the centre.
     ``taught_yaw`` (the demonstrated cluster's yaw [rad]) settles that tie: the object yaw
     nearest it keeps the offset on the side it was taught, e.g. towards the camera when the
-    cluster's centre sits behind a bar handle (its posts pull it back). Without it the
-    tie went to whichever side the footprint's yaw wrapped to (3 cm off a handle).
+    cluster's centre sits behind a bar handle (its posts pull it back).
 
     ``yaw_ok`` (a goal ``[x, y, z, yaw]`` -> bool) leaves out goals the wrist reaches only
-    the long way round, past its limit (``CartesianController.wrist_short_way``): a box
-    held at yaw -1.5 and placed at -2.8 turned the hand a full turn inside the open box,
-    with both boxes; its equivalent 0.3 was 1.4 rad of wrist away. If none is left, as
-    without it.
+    the long way round, past its limit (``CartesianController.wrist_short_way``), which
+    would turn the hand a full turn with the object in it. If none is left, as without it.
     """
     base = object_yaw(cluster)
     period = cluster.yaw_period if cluster.yaw_period > 0 else math.pi
@@ -238,8 +264,8 @@ def map_goal(
                 raise SmcError(f"edge {edge}: a goal in the base's frame needs its pose")
             goal = compose(base, goal)
             # A pose of the hand relative to the base is a posture: the wrist ends as
-            # taught, not by the gripper's half turn, which swings the elbow elsewhere
-            # (measured: the tucked arm then hid the shelf from the head camera).
+            # taught, not by the gripper's half turn, which swings the elbow elsewhere (and
+            # the arm may then hide what the head camera must see).
             flip = False
         if flip:
             goal[3] = near(float(goal[3]), start[3], math.pi)

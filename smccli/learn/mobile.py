@@ -6,7 +6,7 @@ or both (two POIs, one duration), the goal in the frame of what the hand goes by
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -16,6 +16,7 @@ from smccli.learn.frames import goal_in_hand, goal_in_object
 from smccli.learn.params import SmcParams
 from smccli.learn.segmentation import Fragment, fragment_commands
 from smccli.learn.smc import (
+    Action,
     SalientPerceptions,
     Smc,
     action_from_path,
@@ -23,13 +24,14 @@ from smccli.learn.smc import (
 )
 from smccli.logs import Log
 from smccli.logs.robot import geometry_at, robot_model_of
-from smccli.perception import clusters_from_frame, salient_cluster
+from smccli.perception import Cluster, clusters_from_frame, salient_cluster
 from smccli.perception.room import room_histogram
 from smccli.perception.scan import Scan2D
 from smccli.perception.workspace import crop_warnings
 from smccli.world.geometry import compose, wrap_yaw
 from smccli.world.lidar import RANGE_MAX as LIDAR_RANGE_MAX
 from smccli.world.lidar import lidar_mount
+from smccli.world.robot_model import RobotModel
 from smccli.world.scene import Scene
 
 
@@ -135,8 +137,6 @@ def mobile_manipulator_smcs(
     start pose and it has no salient object (the hand hides what it holds). Otherwise the
     salient object is the cluster nearest the hand where the action ends, within epsilon.
     """
-    name = log.path.name
-    cut: set[str] = set()
     if not len(log.base_t):
         raise LogError(
             f"{log.path}: no /robot/base; a mobile manipulator's log needs its base pose"
@@ -147,92 +147,145 @@ def mobile_manipulator_smcs(
         log.base[np.clip(np.searchsorted(log.base_t, log.poi_t), 0, len(log.base_t) - 1)],
         log.poi,
     )
+    cut: set[str] = set()
     smcs: list[Smc] = []
     held = 0.0
     for k, frag in enumerate(frags):
-        cmds = fragment_commands(log, frag)
-        t = np.array([c.t for c in cmds]) - cmds[0].t
-        if any(c.base is None for c in cmds):
-            raise LogError(
-                f"{name}: a command at t={frag.t0:.2f}-{frag.t1:.2f} s has no base target"
+        m = _motion(log, frag)
+        if m.drives and not m.reaches:
+            nav = _navigation_smc(
+                log,
+                k,
+                frag,
+                m.t,
+                m.base_path,
+                log.base_t,
+                log.base,
+                mount,
+                params,
+                warnings,
+                poi="base",
+                grip=float(m.grip[-1]),
             )
-        base = np.array([c.base for c in cmds], dtype=float)
-        base[:, 2] = np.unwrap(base[:, 2])
-        hand = np.array([c.target for c in cmds], dtype=float)
-        base_path = np.column_stack([base[:, :2], np.zeros(len(base)), base[:, 2]])
-        drives = bool(
-            np.linalg.norm(base[-1, :2] - base[0, :2]) > BASE_MOVED[0]
-            or abs(base[-1, 2] - base[0, 2]) > BASE_MOVED[1]
-        )
-        reaches = bool(np.linalg.norm(hand[-1, :3] - hand[0, :3]) > HAND_MOVED)
-        if drives and not reaches:
-            smcs.append(
-                _navigation_smc(
-                    log,
-                    k,
-                    frag,
-                    t,
-                    base_path,
-                    log.base_t,
-                    log.base,
-                    mount,
-                    params,
-                    warnings,
-                    poi="base",
-                    grip=float(cmds[-1].gripper),
-                )
-            )
+            smcs.append(nav)
             continue
-        grip = np.array([c.gripper for c in cmds])
-        world = compose(base, hand)
-        holding = bool(grip[0] < 0.5)
+        holding = bool(m.grip[0] < 0.5)
         cluster = None
         if not holding:  # reaching for something: the object the hand ends at (ML)
-            frame = log.frame_at(frag.t0)
-            if frame is None:
-                raise LogError(f"{name}: no camera frame near t={frag.t0:.2f} s")
-            base_then = log.base[int(np.argmin(np.abs(log.base_t - frame.t)))]
-            geometry = geometry_at(robot, log, frame.t)
-            clusters = clusters_from_frame(frame, geometry, params.perception, base_then)
-            end = hand_world[int(np.argmin(np.abs(log.poi_t - frag.t1)))][:3]
-            idx = salient_cluster(clusters, end, params.epsilon)
-            cluster = None if idx is None else clusters[idx]
-            if cluster is not None:  # shelves and doors run past a box that rides the base
-                warnings += crop_warnings(name, frame.t, [cluster], params.perception, cut)
-        action = action_from_path(t, world, grip, cluster, params, held_symmetry=held)
-        action = replace(action, poi="hand")
-        if holding:
-            # The hand holds what it moves (a handle, the object): where it goes follows from
-            # where it holds it, whatever the hand hides of it. Goal, and the base's, in the
-            # frame of the hand's start pose.
-            action = replace(
-                action,
-                goal_frame="hand",
-                goal=goal_in_hand(world[0], world[-1]),
-                hand_yaw=float(world[0][3] - base[0][2]),
-            )
-        elif cluster is None:  # nothing to go by: the hand relative to the robot
-            action = replace(action, goal_frame="base", goal=hand[-1].copy())
-        if drives:
-            end = base_path[-1].copy()
-            base_goal = (
-                goal_in_hand(world[0], end)
-                if holding
-                else end
-                if cluster is None
-                else goal_in_object(end, cluster)
-            )
-            action = replace(
-                action, base_dmp=dmp_mod.fit(t, base_path, params.dmp), base_goal=base_goal
-            )
+            cluster = _reached_object(log, frag, robot, hand_world, params, warnings, cut)
+        action = _hand_action(m, cluster, holding, held, params)
         if action.event == "close":
             held = cluster.yaw_period if cluster is not None else 0.0
         elif action.event == "open":
             held = 0.0
         if cluster is None and not holding:
             warnings.append(
-                f"{name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends with no object "
-                f"within {params.epsilon} m of the hand; its goal is stored in the base's frame"
+                f"{log.path.name}: fragment {k + 1} ({frag.t0:.1f}-{frag.t1:.1f} s) ends with no "
+                f"object within {params.epsilon} m of the hand; its goal is stored in the base's "
+                "frame"
             )
         smcs.append(Smc(perception=SalientPerceptions(cluster=cluster, weight=None), action=action))
     return smcs
+
+
+@dataclass(frozen=True, slots=True)
+class _Motion:
+    """What a mobile manipulator's fragment commanded, and what of the robot it moves."""
+
+    t: np.ndarray
+    """Command times from the fragment's start, shape (T,) [s]."""
+    base: np.ndarray
+    """Base targets ``[x, y, yaw]``, yaw unwrapped, shape (T, 3) [m, m, rad]."""
+    hand: np.ndarray
+    """Hand targets ``[x, y, z, yaw]`` in the base's frame, shape (T, 4) [m, rad]."""
+    grip: np.ndarray
+    """Gripper commands in [0, 1] (1 = open), shape (T,)."""
+    drives: bool
+    """The base target moves (:data:`BASE_MOVED`)."""
+    reaches: bool
+    """The hand target moves on the base (:data:`HAND_MOVED`)."""
+
+    @property
+    def base_path(self) -> np.ndarray:
+        """The base targets as a POI path ``[x, y, 0, yaw]``, shape (T, 4)."""
+        return np.column_stack([self.base[:, :2], np.zeros(len(self.base)), self.base[:, 2]])
+
+
+def _motion(log: Log, frag: Fragment) -> _Motion:
+    """The commands of ``frag``: base and hand targets, gripper, and what moves."""
+    cmds = fragment_commands(log, frag)
+    t = np.array([c.t for c in cmds]) - cmds[0].t
+    if any(c.base is None for c in cmds):
+        raise LogError(
+            f"{log.path.name}: a command at t={frag.t0:.2f}-{frag.t1:.2f} s has no base target"
+        )
+    base = np.array([c.base for c in cmds], dtype=float)
+    base[:, 2] = np.unwrap(base[:, 2])
+    hand = np.array([c.target for c in cmds], dtype=float)
+    drives = bool(
+        np.linalg.norm(base[-1, :2] - base[0, :2]) > BASE_MOVED[0]
+        or abs(base[-1, 2] - base[0, 2]) > BASE_MOVED[1]
+    )
+    reaches = bool(np.linalg.norm(hand[-1, :3] - hand[0, :3]) > HAND_MOVED)
+    grip = np.array([c.gripper for c in cmds])
+    return _Motion(t=t, base=base, hand=hand, grip=grip, drives=drives, reaches=reaches)
+
+
+def _reached_object(
+    log: Log,
+    frag: Fragment,
+    robot: RobotModel,
+    hand_world: np.ndarray,
+    params: SmcParams,
+    warnings: list[str],
+    cut: set[str],
+) -> Cluster | None:
+    """The salient object (ML) of a reach: of the clusters in the RGB-D frame at the
+    fragment's start (in odometry's frame), the one nearest where the hand ends
+    (``hand_world`` (N, 4) at the log's POI times), within epsilon; None if none is."""
+    name = log.path.name
+    frame = log.frame_at(frag.t0)
+    if frame is None:
+        raise LogError(f"{name}: no camera frame near t={frag.t0:.2f} s")
+    base_then = log.base[int(np.argmin(np.abs(log.base_t - frame.t)))]
+    geometry = geometry_at(robot, log, frame.t)
+    clusters = clusters_from_frame(frame, geometry, params.perception, base_then)
+    end = hand_world[int(np.argmin(np.abs(log.poi_t - frag.t1)))][:3]
+    idx = salient_cluster(clusters, end, params.epsilon)
+    cluster = None if idx is None else clusters[idx]
+    if cluster is not None:  # shelves and doors run past a box that rides the base
+        warnings += crop_warnings(name, frame.t, [cluster], params.perception, cut)
+    return cluster
+
+
+def _hand_action(
+    m: _Motion, cluster: Cluster | None, holding: bool, held: float, params: SmcParams
+) -> Action:
+    """The action of a fragment that moves the hand (``poi="hand"``): its path in
+    odometry's frame as the DMP, the goal in the frame of the hand's start pose when it
+    ``holding`` something, else in ``cluster``'s, else in the base's; when the base
+    ``drives`` too, its path as a second DMP, its goal in the same frame. ``held``: the
+    symmetry of what the hand holds [rad]."""
+    world = compose(m.base, m.hand)
+    action = action_from_path(m.t, world, m.grip, cluster, params, held_symmetry=held)
+    action = replace(action, poi="hand")
+    if holding:
+        # The hand holds what it moves (a handle, the object): where it goes follows from
+        # where it holds it, whatever the hand hides of it. Goal, and the base's, in the
+        # frame of the hand's start pose.
+        action = replace(
+            action,
+            goal_frame="hand",
+            goal=goal_in_hand(world[0], world[-1]),
+            hand_yaw=float(world[0][3] - m.base[0][2]),
+        )
+    elif cluster is None:  # nothing to go by: the hand relative to the robot
+        action = replace(action, goal_frame="base", goal=m.hand[-1].copy())
+    if not m.drives:
+        return action
+    end = m.base_path[-1].copy()
+    if holding:
+        base_goal = goal_in_hand(world[0], end)
+    else:
+        base_goal = end if cluster is None else goal_in_object(end, cluster)
+    return replace(action, base_dmp=dmp_mod.fit(m.t, m.base_path, params.dmp), base_goal=base_goal)

@@ -155,9 +155,8 @@ def approach_in_frame(
     point.
 
     Spheres, not arc length: while the gripper closes, the operator's tremor jitters the
-    target around the goal for a second or more, which adds centimetres of path length
-    (measured: 3.8 cm in one of 100 bench_pick demonstrations) but never leaves a few
-    millimetres' radius. Pauses and speed do not count either."""
+    target around the goal for a second or more, which adds centimetres of path length but
+    never leaves a few millimetres' radius. Pauses and speed do not count either."""
     p = np.asarray(path, dtype=float)[:, :3]
     back = p[::-1] - p[-1]  # from the goal back in time
     dist = np.linalg.norm(back, axis=1)
