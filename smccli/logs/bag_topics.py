@@ -183,8 +183,31 @@ def draft_map(c: BagContents, robot: Robot | None = None) -> Draft:
     """A topic map with the roles guessed from ``c``, and notes on what it could not tell.
     With the scene's ``robot``, the driver's joint names are matched to the robot file's
     (``joints``, :func:`match_joints`)."""
+    topics: dict[str, Any] = _camera_roles(c)
+    joints = _of(c, "sensor_msgs/msg/JointState")
+    if joints:
+        topics["joint_states"] = _joint_topic(joints).topic
+    poses, notes = _pose_roles(c)
+    others, other_notes = _other_roles(c)
+    topics.update(poses)
+    topics.update(others)
+    notes += other_notes
+    data: dict[str, Any] = {"scene": PLACEHOLDER_SCENE, "world_frame": _world_frame(c)}
+    renames, joint_notes, unmatched = _joint_draft(c, joints, robot)
+    notes += joint_notes
+    if renames:
+        data["joints"] = renames
+    for role in ("color", "depth", "camera_info", "joint_states"):
+        if role not in topics:
+            notes.append(f"{role}: no topic of its type in the bag")
+    data["topics"] = topics
+    return Draft(c.path.name, data, tuple(notes), unmatched)
+
+
+def _camera_roles(c: BagContents) -> dict[str, Any]:
+    """``color``, ``depth`` (an image's encoding or format, else its name, says depth) and
+    ``camera_info`` (the one sharing most of the colour topic's namespace)."""
     topics: dict[str, Any] = {}
-    notes: list[str] = []
     images = _of(c, "sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
     colour = [t for t in images if not _is_depth(t)]
     depth = [t for t in images if _is_depth(t)]
@@ -196,9 +219,14 @@ def draft_map(c: BagContents, robot: Robot | None = None) -> Draft:
     if infos:
         ref = topics.get("color", infos[0].topic)
         topics["camera_info"] = max(infos, key=lambda t: _namespace_match(t.topic, ref)).topic
-    joints = _of(c, "sensor_msgs/msg/JointState")
-    if joints:
-        topics["joint_states"] = min(joints, key=lambda t: t.topic != "/joint_states").topic
+    return topics
+
+
+def _pose_roles(c: BagContents) -> tuple[dict[str, Any], list[str]]:
+    """``command`` (a pose topic named like one) and ``poi`` (another pose topic, else a
+    TF frame named like a tool), with notes."""
+    topics: dict[str, Any] = {}
+    notes: list[str] = []
     poses = _of(c, "geometry_msgs/msg/PoseStamped")
     commands = [t for t in poses if _COMMAND.search(t.topic)]
     measured = [t for t in poses if t not in commands]
@@ -213,6 +241,14 @@ def draft_map(c: BagContents, robot: Robot | None = None) -> Draft:
             notes.append(f"poi: no pose topic; the TF frame {tool!r} is taken for the tool")
         else:
             notes.append("poi: no pose topic and no TF frame named like a tool: name one")
+    return topics, notes
+
+
+def _other_roles(c: BagContents) -> tuple[dict[str, Any], list[str]]:
+    """``gripper_command``, ``weight``, ``lidar``, ``points`` and ``marks`` (a Joy's button
+    when one was pressed), with notes."""
+    topics: dict[str, Any] = {}
+    notes: list[str] = []
     for t in _of(c, "std_msgs/msg/Float64"):
         if re.search(r"grip", t.topic, re.IGNORECASE):
             topics.setdefault("gripper_command", t.topic)
@@ -237,33 +273,39 @@ def draft_map(c: BagContents, robot: Robot | None = None) -> Draft:
                     f"marks: buttons pressed on {mark.topic}: {list(used)}; set `button` to "
                     "the one the operator pressed at each salient moment"
                 )
-    data: dict[str, Any] = {"scene": PLACEHOLDER_SCENE, "world_frame": _world_frame(c)}
-    unmatched: tuple[str, ...] = ()
+    return topics, notes
+
+
+def _joint_topic(joints: list[TopicInfo]) -> TopicInfo:
+    """The JointState topic the map reads: ``/joint_states``, else the first by name."""
+    return min(joints, key=lambda t: t.topic != "/joint_states")
+
+
+def _joint_draft(
+    c: BagContents, joints: list[TopicInfo], robot: Robot | None
+) -> tuple[dict[str, str], list[str], tuple[str, ...]]:
+    """The driver's names renamed to ``robot``'s, notes, and the names left for the user."""
+    notes: list[str] = []
     if len(joints) > 1:
         notes.append(
             f"joint_states: {len(joints)} JointState topics "
-            f"({', '.join(t.topic for t in joints)}); the map reads {topics['joint_states']} "
-            "only (an arm's and a gripper's publishers are merged when they share a topic)"
+            f"({', '.join(t.topic for t in joints)}); the map reads "
+            f"{_joint_topic(joints).topic} only (an arm's "
+            "and a gripper's publishers are merged when they share a topic)"
         )
-    if joints and robot is None:
+    if not joints:
+        return {}, notes, ()
+    if robot is None:
         notes.append(
             f"joint_states: the driver's names ({joints[0].detail}); if they differ from the "
             "robot file's, add `joints: {driver_name: robot_name, ...}` (or give --scene)"
         )
-    elif joints and robot is not None:
-        # Every JointState topic's names: a gripper publishing on its own topic is still
-        # the robot's, and its names may fit the arm's joints too.
-        driver = dict.fromkeys(n for t in joints for n in c.joint_names.get(t.topic, ()))
-        match = match_joints(tuple(driver), robot)
-        notes.extend(match.notes(robot))
-        unmatched = match.unmatched
-        if match.renames:
-            data["joints"] = match.renames
-    for role in ("color", "depth", "camera_info", "joint_states"):
-        if role not in topics:
-            notes.append(f"{role}: no topic of its type in the bag")
-    data["topics"] = topics
-    return Draft(c.path.name, data, tuple(notes), unmatched)
+        return {}, notes, ()
+    # Every JointState topic's names: a gripper publishing on its own topic is still the
+    # robot's, and its names may fit the arm's joints too.
+    driver = dict.fromkeys(n for t in joints for n in c.joint_names.get(t.topic, ()))
+    match = match_joints(tuple(driver), robot)
+    return match.renames, notes + match.notes(robot), match.unmatched
 
 
 @dataclass(frozen=True, slots=True)
