@@ -20,7 +20,8 @@ from typing import TYPE_CHECKING, Any
 
 import yaml
 
-from smccli.logs.ros2_bag import TF_TOPICS, open_bag, resolve_bag
+from smccli.logs.bag_source import open_bag, resolve_bag
+from smccli.logs.tf_buffer import TF_TOPICS
 
 if TYPE_CHECKING:
     from smccli.world.robot import Robot
