@@ -12,6 +12,11 @@ decoded from the definitions stored in the bag (``mcap-ros2-support``: no ROS in
 A bag carries no scene: the map names it (the robot's model is needed for the
 self-filter, the gripper and the sensors); a bag exported by ``smc export --ros2`` carries
 the scene as attachments, which are used first.
+
+The layers under it: the map (:mod:`~smccli.logs.topic_map`), opening a bag of any storage
+(:mod:`~smccli.logs.bag_source`), transforms (:mod:`~smccli.logs.tf_buffer`), images and
+depth (:mod:`~smccli.logs.ros2_images`); drafting a map for a new bag in
+:mod:`~smccli.logs.bag_topics`.
 """
 
 from __future__ import annotations
