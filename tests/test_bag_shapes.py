@@ -551,7 +551,8 @@ def test_a_driver_joint_is_matched_only_when_exactly_one_fits(tmp_path: Path) ->
     assert data["scene"] == "bench_pick_panda"
     assert data["joints"] == {f"panda_joint{i}": f"joint{i}" for i in range(3, 8)}, text
     assert "panda_finger_joint1, panda_joint1 all fit robot joint joint1" in text
-    assert "the map reads /franka_gripper/joint_states only" in text
+    assert "the map reads /franka_state_controller/joint_states only" in text
+    assert data["topics"]["joint_states"] == "/franka_state_controller/joint_states"
     # The command's last line says what is left: the joints, not the scene it filled in.
     proc = smc("topics", bag, "--scene", "bench_pick_panda", "-o", tmp_path / "map.yaml")
     assert proc.returncode == 0, proc.stderr

@@ -187,7 +187,7 @@ def draft_map(c: BagContents, robot: Robot | None = None) -> Draft:
     topics: dict[str, Any] = _camera_roles(c)
     joints = _of(c, "sensor_msgs/msg/JointState")
     if joints:
-        topics["joint_states"] = _joint_topic(joints).topic
+        topics["joint_states"] = _joint_topic(c, joints).topic
     poses, notes = _pose_roles(c)
     others, other_notes = _other_roles(c)
     topics.update(poses)
@@ -277,9 +277,14 @@ def _other_roles(c: BagContents) -> tuple[dict[str, Any], list[str]]:
     return topics, notes
 
 
-def _joint_topic(joints: list[TopicInfo]) -> TopicInfo:
-    """The JointState topic the map reads: ``/joint_states``, else the first by name."""
-    return min(joints, key=lambda t: t.topic != "/joint_states")
+def _joint_topic(c: BagContents, joints: list[TopicInfo]) -> TopicInfo:
+    """The JointState topic the map reads: ``/joint_states``, else the one with the most
+    joints (an arm's rather than its gripper's), else the first by name."""
+
+    def rank(t: TopicInfo) -> tuple[bool, int]:
+        return t.topic != "/joint_states", -len(c.joint_names.get(t.topic, ()))
+
+    return min(joints, key=rank)
 
 
 def _joint_draft(
@@ -291,7 +296,7 @@ def _joint_draft(
         notes.append(
             f"joint_states: {len(joints)} JointState topics "
             f"({', '.join(t.topic for t in joints)}); the map reads "
-            f"{_joint_topic(joints).topic} only (an arm's "
+            f"{_joint_topic(c, joints).topic} only (an arm's "
             "and a gripper's publishers are merged when they share a topic)"
         )
     if not joints:
