@@ -82,11 +82,24 @@ class ChunkError(ValueError):
     field running past its end."""
 
 
+class ChunkCrcError(ChunkError):
+    """A chunk whose decompressed bytes do not match its stored CRC."""
+
+    def __init__(self, expected: int, actual: int) -> None:
+        super().__init__(
+            f"crc validation failed in Chunk, expected: {expected}, calculated: {actual}"
+        )
+        self.expected = expected
+        """The CRC-32 the chunk stores."""
+        self.actual = actual
+        """The CRC-32 of its decompressed bytes."""
+
+
 def _chunk_records(chunk: Chunk) -> list[McapRecord]:
     """The schemas, channels and messages of ``chunk`` in order, as mcap's record classes
     (a record of another kind is skipped, as the spec allows); ChunkError when it does not
     read."""
-    data = _decompressed(chunk)
+    data = decompressed(chunk)
     out: list[McapRecord] = []
     pos, size = 0, len(data)
     while pos < size:
@@ -118,7 +131,10 @@ def _chunk_records(chunk: Chunk) -> list[McapRecord]:
     return out
 
 
-def _decompressed(chunk: Chunk) -> bytes:
+def decompressed(chunk: Chunk) -> bytes:
+    """A chunk's records as bytes, its CRC checked (when stored): ChunkCrcError on a
+    mismatch, ChunkError for an unknown compression; zstandard's and lz4's own errors
+    for a damaged frame."""
     if chunk.compression == "zstd":
         data = zstandard.decompress(chunk.data, chunk.uncompressed_size)
     elif chunk.compression == "lz4":
@@ -131,9 +147,7 @@ def _decompressed(chunk: Chunk) -> bytes:
         raise ChunkError(f"chunk compression {chunk.compression!r}, expected zstd, lz4 or none")
     crc = zlib.crc32(data)
     if chunk.uncompressed_crc != 0 and crc != chunk.uncompressed_crc:
-        raise ChunkError(
-            f"crc validation failed in Chunk, expected: {chunk.uncompressed_crc}, calculated: {crc}"
-        )
+        raise ChunkCrcError(chunk.uncompressed_crc, crc)
     return data
 
 
