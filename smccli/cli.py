@@ -60,7 +60,7 @@ def topics_command(
     force: Annotated[bool, typer.Option(help="Overwrite an existing --output.")] = False,
 ) -> None:
     """What a bag holds (topics, types, counts, rates, TF frames) and a draft topic map."""
-    from smccli.logs.bag_topics import bag_contents, draft_map_text
+    from smccli.logs.bag_topics import bag_contents, draft_topic_map
     from smccli.outputs import check_output, write_atomic
 
     if output is not None:
@@ -81,13 +81,13 @@ def topics_command(
     if contents.frames:
         links = [f"{p} -> {c}{' (static)' if s else ''}" for p, c, s in contents.frames]
         out.print("TF frames: " + escape(", ".join(links)), highlight=False)
-    text = draft_map_text(contents, scene)
+    draft = draft_topic_map(contents, scene)
     if output is None:
-        out.print(escape(text), highlight=False)
+        out.print(escape(draft.text()), highlight=False)
         return
-    write_atomic(output, text)
+    write_atomic(output, draft.text())
     out.print(
-        f"[bold green]wrote[/] {escape(str(output))}: fill in its scene, check each role, then "
+        f"[bold green]wrote[/] {escape(str(output))}: {escape(', '.join(draft.todo()))}, then "
         f"`smc doctor {escape(str(bag))} --topics {escape(str(output))}`",
         highlight=False,
     )

@@ -199,7 +199,7 @@ def _cut_in_first_chunk(folder: Path) -> tuple[Path, list[str]]:
 
 
 def _zstd_frame_claims_terabytes(folder: Path) -> tuple[Path, list[str]]:
-    """A chunk whose zstd frame header claims 32 TiB of content (a fuzzed log found it):
+    """A chunk whose zstd frame header claims 32 TiB of content:
     zstandard tries to allocate that and raises MemoryError."""
     data = bytearray(SAMPLE.read_bytes())
     i = data.index(b"\x28\xb5\x2f\xfd")  # the first zstd frame's magic

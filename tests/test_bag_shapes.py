@@ -512,6 +512,86 @@ def test_the_drafted_map_compiles_each_shape_once_its_scene_is_filled_in(
     assert again.returncode == 2 and len(again.stderr.strip().splitlines()) == 1
 
 
+FRANKA_ARM = tuple(f"panda_joint{i}" for i in range(1, 8))
+FRANKA_FINGERS = ("panda_finger_joint1", "panda_finger_joint2")
+
+
+def _franka_bag(folder: Path) -> Path:
+    """A Franka's joints as franka_ros publishes them: the arm's on
+    /franka_state_controller/joint_states, the gripper's on /franka_gripper/joint_states."""
+    state = TS.types["sensor_msgs/msg/JointState"]
+    header = TS.types["std_msgs/msg/Header"]
+    stamp = TS.types["builtin_interfaces/msg/Time"]
+    messages: list[Message] = []
+    for k in range(5):
+        t = 10**9 + k * 10_000_000
+        for topic, names in (
+            ("/franka_state_controller/joint_states", FRANKA_ARM),
+            ("/franka_gripper/joint_states", FRANKA_FINGERS),
+        ):
+            msg = state(
+                header=header(stamp=stamp(sec=t // 10**9, nanosec=t % 10**9), frame_id=""),
+                name=list(names),
+                position=np.zeros(len(names)),
+                velocity=np.zeros(len(names)),
+                effort=np.zeros(len(names)),
+            )
+            messages.append((topic, "sensor_msgs/msg/JointState", t, msg))
+    return write_rosbag2(folder, messages, StoragePlugin.MCAP)
+
+
+def test_a_driver_joint_is_matched_only_when_exactly_one_fits(tmp_path: Path) -> None:
+    """A Franka's gripper on a topic of its own: panda_finger_joint1 and panda_joint1 both
+    fit the robot's joint1, so neither is renamed; the draft says so, and what is left."""
+    from smccli.logs.bag_topics import bag_contents, draft_map_text
+
+    bag = _franka_bag(tmp_path / "franka")
+    text = draft_map_text(bag_contents(bag), "bench_pick_panda")
+    data = yaml.safe_load(text)
+    assert data["scene"] == "bench_pick_panda"
+    assert data["joints"] == {f"panda_joint{i}": f"joint{i}" for i in range(3, 8)}, text
+    assert "panda_finger_joint1, panda_joint1 all fit robot joint joint1" in text
+    assert "the map reads /franka_state_controller/joint_states only" in text
+    assert data["topics"]["joint_states"] == "/franka_state_controller/joint_states"
+    # The command's last line says what is left: the joints, not the scene it filled in.
+    proc = smc("topics", bag, "--scene", "bench_pick_panda", "-o", tmp_path / "map.yaml")
+    assert proc.returncode == 0, proc.stderr
+    said = " ".join(proc.stdout.split())
+    assert "fill in its scene" not in said
+    assert (
+        "map the joints panda_finger_joint1, panda_finger_joint2, panda_joint1, panda_joint2 "
+        "by hand, check each role" in said
+    ), said
+    proc = smc("topics", bag, "-o", tmp_path / "unfilled.yaml")
+    assert proc.returncode == 0, proc.stderr
+    said = " ".join(proc.stdout.split())
+    assert "fill in its scene, check each role, then" in said and "map the joints" not in said
+
+
+def test_two_driver_joints_to_one_robot_joint_are_refused(exported, tmp_path: Path) -> None:
+    """A map that sends two driver joints to one robot joint would merge their states
+    into one joint: one line naming the map and both driver joints, exit 2; so is a
+    driver's name the map gives a joint the driver also publishes."""
+    messages, data = exported
+    bag = write_rosbag2(tmp_path / "bag", list(_renamed(messages)), StoragePlugin.MCAP)
+    names = read_ros2_bag_native().joint_states[0].names
+    data = yaml.safe_load(yaml.safe_dump(data))
+    data["joints"] = {f"driver_{n}": n for n in names}
+    data["joints"]["driver_finger_right_joint"] = "finger_left_joint"
+    (tmp_path / "map.yaml").write_text(yaml.safe_dump(data))
+    proc = smc("compile", bag, "--topics", tmp_path / "map.yaml", "-o", tmp_path / "t.json")
+    assert proc.returncode == 2, proc.stderr
+    (line,) = proc.stderr.strip().splitlines()
+    assert f"{tmp_path / 'map.yaml'}: joints:" in " ".join(proc.stderr.split())
+    assert "driver_finger_left_joint and driver_finger_right_joint" in line, line
+    assert not (tmp_path / "t.json").exists()
+    # The driver publishes joint1 and joint2; the map renames joint2 to joint1.
+    plain = write_rosbag2(tmp_path / "plain", messages, StoragePlugin.MCAP)
+    data["joints"] = {"joint2": "joint1"}
+    with pytest.raises(LogError, match=r"joints joint1 and joint2 both read as robot joint joint1"):
+        read_ros2_bag(plain, parse_topic_map(data))
+
+
 def _shifted(msg: Any, dt_ns: int) -> Any:
     """``msg`` with every stamp in it ``dt_ns`` later."""
     if getattr(msg, "__msgtype__", "") == "builtin_interfaces/msg/Time":

@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mcap.reader import make_reader
-from mcap.writer import Writer
+from mcap.records import Chunk
+from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import build_file_descriptor_set
 
 import smccli
@@ -486,6 +487,53 @@ def _one_message_per_chunk(src: Path, out: Path) -> Path:
             w.add_message(channel.id, msg.log_time, msg.data, msg.publish_time, msg.sequence)
         w.finish()
     return out
+
+
+def _rechunked(src: Path, out: Path, compression: CompressionType) -> Path:
+    """``src`` rewritten by mcap's own writer with chunks in ``compression``."""
+    with open(src, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        messages = list(reader.iter_messages(log_time_order=False))
+    with open(out, "wb") as f:
+        w = Writer(f, compression=compression, chunk_size=64 * 1024)
+        w.start()
+        for s in summary.schemas.values():
+            w.register_schema(s.name, s.encoding, s.data)
+        for c in summary.channels.values():
+            w.register_channel(c.topic, c.message_encoding, c.schema_id, c.metadata)
+        for _, channel, msg in messages:
+            w.add_message(channel.id, msg.log_time, msg.data, msg.publish_time, msg.sequence)
+        w.finish()
+    return out
+
+
+def test_the_chunk_walker_reads_what_mcaps_reader_reads(tmp_path: Path) -> None:
+    """smc's chunk walker (``records._chunk_records``) builds mcap's record classes: run
+    against the installed mcap (pinned in pyproject.toml), it gives every record of every
+    chunk as mcap's own StreamReader does, in zstd (smc's logs), lz4 and uncompressed."""
+    from mcap.stream_reader import StreamReader
+
+    import smccli.logs.records as records
+
+    src = REPO / "sample_logs" / "bench_pick" / "demo.mcap"
+    logs = [src, *(REPO / "sample_logs" / "pick_place").glob("*.mcap")]
+    logs += [
+        _rechunked(src, tmp_path / f"{c.name}.mcap", c)
+        for c in (CompressionType.LZ4, CompressionType.NONE)
+    ]
+    for log in logs:
+        with open(log, "rb") as f:
+            theirs = list(StreamReader(f, validate_crcs=True).records)
+        with open(log, "rb") as f:
+            ours = [
+                r
+                for rec in StreamReader(f, validate_crcs=True, emit_chunks=True).records
+                for r in (records._chunk_records(rec) if isinstance(rec, Chunk) else [rec])
+            ]
+        assert len(ours) == len(theirs) > 100, log
+        assert ours == theirs, log
 
 
 def test_a_reader_of_some_topics_leaves_the_other_chunks_compressed(tmp_path, monkeypatch):

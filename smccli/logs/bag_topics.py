@@ -14,13 +14,14 @@ from __future__ import annotations
 
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import yaml
 
-from smccli.logs.ros2_bag import TF_TOPICS, open_bag, resolve_bag
+from smccli.logs.bag_source import open_bag, resolve_bag
+from smccli.logs.tf_buffer import TF_TOPICS
 
 if TYPE_CHECKING:
     from smccli.world.robot import Robot
@@ -143,12 +144,71 @@ def _namespace_match(a: str, b: str) -> int:
     return n
 
 
-def draft_map(c: BagContents, robot: Robot | None = None) -> tuple[dict[str, Any], list[str]]:
-    """A topic map (``schemas/topic_map.schema.json``) with the roles guessed from ``c``,
-    and notes on what it could not tell (for the YAML's comments). With the scene's
-    ``robot``, the driver's joint names are matched to the robot file's (``joints``)."""
+@dataclass(frozen=True, slots=True)
+class Draft:
+    """A drafted topic map and what is left for the user before it reads the bag."""
+
+    bag: str
+    """The bag's file or directory name."""
+    data: dict[str, Any]
+    """The map (``schemas/topic_map.schema.json``); its scene :data:`PLACEHOLDER_SCENE`
+    when none was given."""
+    notes: tuple[str, ...]
+    """What the draft could not tell, one line each (the YAML's comments)."""
+    unmatched: tuple[str, ...] = ()
+    """Driver joint names left for the user (matched against a scene's robot only)."""
+
+    @property
+    def scene_filled(self) -> bool:
+        return self.data["scene"] != PLACEHOLDER_SCENE
+
+    def todo(self) -> tuple[str, ...]:
+        """What the user has left to do, in order (checking each guessed role always)."""
+        out = [] if self.scene_filled else ["fill in its scene"]
+        if self.unmatched:
+            out.append(f"map the joints {', '.join(self.unmatched)} by hand")
+        return (*out, "check each role")
+
+    def text(self) -> str:
+        """The map as YAML, with comments saying what to check."""
+        head = [
+            f"# Topic map drafted by `smc topics` from {self.bag}: check every line.",
+            "# scene: the scene the bag was recorded in, with its robot (a built-in name, or the",
+            "# path of a scene.yaml relative to this file). Then: smc doctor BAG --topics MAP.",
+            *(f"# note: {n}" for n in self.notes),
+        ]
+        return "\n".join(head) + "\n" + yaml.safe_dump(self.data, sort_keys=False)
+
+
+def draft_map(c: BagContents, robot: Robot | None = None) -> Draft:
+    """A topic map with the roles guessed from ``c``, and notes on what it could not tell.
+    With the scene's ``robot``, the driver's joint names are matched to the robot file's
+    (``joints``, :func:`match_joints`)."""
+    topics: dict[str, Any] = _camera_roles(c)
+    joints = _of(c, "sensor_msgs/msg/JointState")
+    if joints:
+        topics["joint_states"] = _joint_topic(c, joints).topic
+    poses, notes = _pose_roles(c)
+    others, other_notes = _other_roles(c)
+    topics.update(poses)
+    topics.update(others)
+    notes += other_notes
+    data: dict[str, Any] = {"scene": PLACEHOLDER_SCENE, "world_frame": _world_frame(c)}
+    renames, joint_notes, unmatched = _joint_draft(c, joints, robot)
+    notes += joint_notes
+    if renames:
+        data["joints"] = renames
+    for role in ("color", "depth", "camera_info", "joint_states"):
+        if role not in topics:
+            notes.append(f"{role}: no topic of its type in the bag")
+    data["topics"] = topics
+    return Draft(c.path.name, data, tuple(notes), unmatched)
+
+
+def _camera_roles(c: BagContents) -> dict[str, Any]:
+    """``color``, ``depth`` (an image's encoding or format, else its name, says depth) and
+    ``camera_info`` (the one sharing most of the colour topic's namespace)."""
     topics: dict[str, Any] = {}
-    notes: list[str] = []
     images = _of(c, "sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
     colour = [t for t in images if not _is_depth(t)]
     depth = [t for t in images if _is_depth(t)]
@@ -160,9 +220,14 @@ def draft_map(c: BagContents, robot: Robot | None = None) -> tuple[dict[str, Any
     if infos:
         ref = topics.get("color", infos[0].topic)
         topics["camera_info"] = max(infos, key=lambda t: _namespace_match(t.topic, ref)).topic
-    joints = _of(c, "sensor_msgs/msg/JointState")
-    if joints:
-        topics["joint_states"] = min(joints, key=lambda t: t.topic != "/joint_states").topic
+    return topics
+
+
+def _pose_roles(c: BagContents) -> tuple[dict[str, Any], list[str]]:
+    """``command`` (a pose topic named like one) and ``poi`` (another pose topic, else a
+    TF frame named like a tool), with notes."""
+    topics: dict[str, Any] = {}
+    notes: list[str] = []
     poses = _of(c, "geometry_msgs/msg/PoseStamped")
     commands = [t for t in poses if _COMMAND.search(t.topic)]
     measured = [t for t in poses if t not in commands]
@@ -177,6 +242,14 @@ def draft_map(c: BagContents, robot: Robot | None = None) -> tuple[dict[str, Any
             notes.append(f"poi: no pose topic; the TF frame {tool!r} is taken for the tool")
         else:
             notes.append("poi: no pose topic and no TF frame named like a tool: name one")
+    return topics, notes
+
+
+def _other_roles(c: BagContents) -> tuple[dict[str, Any], list[str]]:
+    """``gripper_command``, ``weight``, ``lidar``, ``points`` and ``marks`` (a Joy's button
+    when one was pressed), with notes."""
+    topics: dict[str, Any] = {}
+    notes: list[str] = []
     for t in _of(c, "std_msgs/msg/Float64"):
         if re.search(r"grip", t.topic, re.IGNORECASE):
             topics.setdefault("gripper_command", t.topic)
@@ -201,45 +274,111 @@ def draft_map(c: BagContents, robot: Robot | None = None) -> tuple[dict[str, Any
                     f"marks: buttons pressed on {mark.topic}: {list(used)}; set `button` to "
                     "the one the operator pressed at each salient moment"
                 )
-    renames: dict[str, str] = {}
-    if joints and robot is None:
+    return topics, notes
+
+
+def _joint_topic(c: BagContents, joints: list[TopicInfo]) -> TopicInfo:
+    """The JointState topic the map reads: ``/joint_states``, else the one with the most
+    joints (an arm's rather than its gripper's), else the first by name."""
+
+    def rank(t: TopicInfo) -> tuple[bool, int]:
+        return t.topic != "/joint_states", -len(c.joint_names.get(t.topic, ()))
+
+    return min(joints, key=rank)
+
+
+def _joint_draft(
+    c: BagContents, joints: list[TopicInfo], robot: Robot | None
+) -> tuple[dict[str, str], list[str], tuple[str, ...]]:
+    """The driver's names renamed to ``robot``'s, notes, and the names left for the user."""
+    notes: list[str] = []
+    if len(joints) > 1:
+        notes.append(
+            f"joint_states: {len(joints)} JointState topics "
+            f"({', '.join(t.topic for t in joints)}); the map reads "
+            f"{_joint_topic(c, joints).topic} only (an arm's "
+            "and a gripper's publishers are merged when they share a topic)"
+        )
+    if not joints:
+        return {}, notes, ()
+    if robot is None:
         notes.append(
             f"joint_states: the driver's names ({joints[0].detail}); if they differ from the "
             "robot file's, add `joints: {driver_name: robot_name, ...}` (or give --scene)"
         )
-    elif joints and robot is not None:
-        renames, unmatched = match_joints(c.joint_names.get(topics["joint_states"], ()), robot)
-        if unmatched:
-            notes.append(
-                f"joints: {', '.join(unmatched)} match none of robot {robot.name!r}'s "
+        return {}, notes, ()
+    # Every JointState topic's names: a gripper publishing on its own topic is still the
+    # robot's, and its names may fit the arm's joints too.
+    driver = dict.fromkeys(n for t in joints for n in c.joint_names.get(t.topic, ()))
+    match = match_joints(tuple(driver), robot)
+    return match.renames, notes + match.notes(robot), match.unmatched
+
+
+@dataclass(frozen=True, slots=True)
+class JointMatch:
+    """The driver's joint names matched to a robot file's."""
+
+    renames: dict[str, str]
+    """A driver name -> the robot's, where that robot joint is the only one that fits the
+    driver's and the driver's is the only one that fits it."""
+    unfit: tuple[str, ...]
+    """Driver names no robot joint fits."""
+    shared: dict[str, tuple[str, ...]]
+    """A robot joint -> the driver names that all fit it (none of them renamed)."""
+    several: dict[str, tuple[str, ...]]
+    """A driver name -> the robot joints that all fit it (not renamed)."""
+
+    unmatched: tuple[str, ...]
+    """Every driver name left for the user (of the three kinds above), in the driver's
+    order."""
+
+    def notes(self, robot: Robot) -> list[str]:
+        """One line per kind of name left for the user, for the draft's comments."""
+        out = [
+            f"joints: {', '.join(ds)} all fit robot joint {r}: map the right one by hand"
+            for r, ds in self.shared.items()
+        ]
+        out += [
+            f"joints: {d} fits robot joints {', '.join(rs)}: map it by hand"
+            for d, rs in self.several.items()
+        ]
+        if self.unfit:
+            out.append(
+                f"joints: {', '.join(self.unfit)} match none of robot {robot.name!r}'s "
                 f"({', '.join(robot.joint_names)}): map them by hand"
             )
-    for role in ("color", "depth", "camera_info", "joint_states"):
-        if role not in topics:
-            notes.append(f"{role}: no topic of its type in the bag")
-    data: dict[str, Any] = {"scene": PLACEHOLDER_SCENE, "world_frame": _world_frame(c)}
-    if renames:
-        data["joints"] = renames
-    data["topics"] = topics
-    return data, notes
+        return out
 
 
-def match_joints(driver: Sequence[str], robot: Robot) -> tuple[dict[str, str], list[str]]:
-    """The driver's joint names matched to the robot file's: equal, or one ending with the
-    other (``panda_joint1`` and ``joint1``), when exactly one robot joint fits. Returns the
-    renames and the names no robot joint fits."""
+def match_joints(driver: Sequence[str], robot: Robot) -> JointMatch:
+    """The driver's joint names matched to the robot file's. A driver name fits a robot
+    joint of the same name, else one it ends with or that ends with it (``panda_joint1``
+    and ``joint1``); it is renamed only when exactly one fits, each way: a robot joint two
+    driver names fit (``panda_joint1`` and ``panda_finger_joint1`` both end with
+    ``joint1``) is left for the user, as is a driver name that fits two."""
     ours = robot.joint_names
+    fits: dict[str, list[str]] = {}
+    for name in dict.fromkeys(driver):
+        fits[name] = (
+            [name] if name in ours else [r for r in ours if name.endswith(r) or r.endswith(name)]
+        )
+    fitted_by: dict[str, list[str]] = {}
+    for name, rs in fits.items():
+        for r in rs:
+            fitted_by.setdefault(r, []).append(name)
     renames: dict[str, str] = {}
-    unmatched: list[str] = []
-    for name in driver:
-        if name in ours:
-            continue
-        fits = [r for r in ours if name.endswith(r) or r.endswith(name)]
-        if len(fits) == 1 and fits[0] not in renames.values():
-            renames[name] = fits[0]
-        else:
-            unmatched.append(name)
-    return renames, unmatched
+    for name, rs in fits.items():
+        if len(rs) == 1 and len(fitted_by[rs[0]]) == 1 and rs[0] != name:
+            renames[name] = rs[0]
+    shared = {r: tuple(ds) for r, ds in fitted_by.items() if len(ds) > 1}
+    in_shared = {d for ds in shared.values() for d in ds}
+    return JointMatch(
+        renames=renames,
+        unfit=tuple(n for n, rs in fits.items() if not rs),
+        shared=shared,
+        several={n: tuple(rs) for n, rs in fits.items() if len(rs) > 1},
+        unmatched=tuple(n for n, rs in fits.items() if len(rs) != 1 or n in in_shared),
+    )
 
 
 def _tool_frame(c: BagContents) -> str | None:
@@ -273,22 +412,22 @@ def _world_frame(c: BagContents) -> str:
     return roots[0] if roots else "world"
 
 
-def draft_map_text(c: BagContents, scene: str | None = None) -> str:
-    """The draft map as YAML, with comments saying what to check; ``scene`` (a built-in
-    name or a scene.yaml path) fills in the scene line and matches the joint names."""
+def draft_topic_map(c: BagContents, scene: str | None = None) -> Draft:
+    """The draft map of ``c``; ``scene`` (a built-in name or a scene.yaml path) fills in
+    the scene line and matches the joint names to its robot's."""
     robot = None
     if scene is not None:
         from smccli.world.scene import load_scene
 
         robot = load_scene(scene).robot
-    data, notes = draft_map(c, robot)
+    draft = draft_map(c, robot)
     if scene is not None:  # a path as the map will read it: relative to nothing
         path_like = scene.endswith((".yaml", ".yml")) or "/" in scene
-        data["scene"] = str(Path(scene).resolve()) if path_like else scene
-    head = [
-        f"# Topic map drafted by `smc topics` from {c.path.name}: check every line.",
-        "# scene: the scene the bag was recorded in, with its robot (a built-in name, or the",
-        "# path of a scene.yaml relative to this file). Then: smc doctor BAG --topics MAP.",
-        *(f"# note: {n}" for n in notes),
-    ]
-    return "\n".join(head) + "\n" + yaml.safe_dump(data, sort_keys=False)
+        filled = str(Path(scene).resolve()) if path_like else scene
+        draft = replace(draft, data={**draft.data, "scene": filled})
+    return draft
+
+
+def draft_map_text(c: BagContents, scene: str | None = None) -> str:
+    """The draft map of ``c`` as YAML with its comments (:func:`draft_topic_map`)."""
+    return draft_topic_map(c, scene).text()

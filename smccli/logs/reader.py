@@ -18,7 +18,7 @@ from smccli.logs import topics as tp
 from smccli.logs.checks import check_attachments, check_channels, check_times
 from smccli.logs.decode import Decoder, unwrap_yaw
 from smccli.logs.log import Log
-from smccli.logs.records import read_bytes, scan_records
+from smccli.logs.records import RawLog, read_bytes, scan_records
 
 _log = logging.getLogger(__name__)
 
@@ -72,15 +72,7 @@ def read_log(
             "not written by smc?)"
         )
     check_times(path, raw)
-    counts: dict[str, int] = {c.topic: 0 for c in raw.channels.values()}
-    for m in raw.messages:
-        counts[raw.topic(m)] += 1
-    for cid, n in raw.skipped.items():  # chunks left compressed: counted by their indexes
-        counts[raw.channels[cid].topic] += n
-    missing = [t for t in required_topics if counts.get(t, 0) == 0]
-    if missing:
-        have = ", ".join(sorted(t for t, n in counts.items() if n)) or "none"
-        raise LogError(f"{path}: topic {', '.join(missing)} missing (topics present: {have})")
+    counts = _topic_counts(path, raw, required_topics)
     d = Decoder(path, raw, wanted, warn)
     for m in raw.messages:
         d.add(m)
@@ -108,3 +100,18 @@ def read_log(
         base=unwrap_yaw(np.array(d.base, dtype=float).reshape(-1, 3), column=2),
         camera=d.camera() if lazy_frames else None,
     )
+
+
+def _topic_counts(path: Path, raw: RawLog, required: Iterable[str]) -> dict[str, int]:
+    """Messages per topic, those in chunks left compressed counted by their indexes;
+    LogError when a ``required`` topic has none."""
+    counts: dict[str, int] = {c.topic: 0 for c in raw.channels.values()}
+    for m in raw.messages:
+        counts[raw.topic(m)] += 1
+    for cid, n in raw.skipped.items():
+        counts[raw.channels[cid].topic] += n
+    missing = [t for t in required if counts.get(t, 0) == 0]
+    if missing:
+        have = ", ".join(sorted(t for t, n in counts.items() if n)) or "none"
+        raise LogError(f"{path}: topic {', '.join(missing)} missing (topics present: {have})")
+    return counts

@@ -12,325 +12,50 @@ decoded from the definitions stored in the bag (``mcap-ros2-support``: no ROS in
 A bag carries no scene: the map names it (the robot's model is needed for the
 self-filter, the gripper and the sensors); a bag exported by ``smc export --ros2`` carries
 the scene as attachments, which are used first.
+
+The layers under it: the map (:mod:`~smccli.logs.topic_map`), opening a bag of any storage
+(:mod:`~smccli.logs.bag_source`), transforms (:mod:`~smccli.logs.tf_buffer`), images and
+depth (:mod:`~smccli.logs.ros2_images`); drafting a map for a new bag in
+:mod:`~smccli.logs.bag_topics`.
 """
 
 from __future__ import annotations
 
 import bisect
-import hashlib
-import io
-import struct
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from mcap.exceptions import McapError
-from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
 
-from smccli.errors import LogError, SceneError
+from smccli.errors import LogError
 from smccli.logs import topics as tp
+from smccli.logs.bag_source import BagSource, open_bag, resolve_bag
 from smccli.logs.decode import unwrap_yaw
 from smccli.logs.log import Log, PointCloudMsg, Scan
-from smccli.schemas import validate_yaml
+from smccli.logs.ros2_images import compressed_depth, ros_depth, ros_rgb
+from smccli.logs.tf_buffer import TF_TOPICS, TfBuffer, stamp_ns
+from smccli.logs.topic_map import ROLE_OF, ROLES, TopicMap, load_topic_map, parse_topic_map
 from smccli.world.geometry import quat_matrix, yaw_of
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
-ROLES: dict[str, tuple[str, tuple[str, ...]]] = {
-    "command": (tp.COMMAND, ("geometry_msgs/msg/PoseStamped",)),
-    "gripper_command": (tp.COMMAND, ("std_msgs/msg/Float64",)),
-    "poi": (tp.POI, ("geometry_msgs/msg/PoseStamped",)),
-    "joint_states": (tp.JOINT_STATES, ("sensor_msgs/msg/JointState",)),
-    "color": (tp.COLOR, ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")),
-    "depth": (tp.DEPTH, ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")),
-    "camera_info": (tp.CALIBRATION, ("sensor_msgs/msg/CameraInfo",)),
-    "weight": (tp.WEIGHT, ("std_msgs/msg/Float64",)),
-    "lidar": (tp.SCAN, ("sensor_msgs/msg/LaserScan",)),
-    "marks": (tp.SALIENCY, ("std_msgs/msg/String", "std_msgs/msg/Empty", "sensor_msgs/msg/Joy")),
-    "points": (tp.POINTS, ("sensor_msgs/msg/PointCloud2",)),
-}
-"""Map role -> (the native topic it stands for, the ROS 2 types it may hold)."""
-ROLE_OF = {native: role for role, (native, _) in reversed(ROLES.items())}
-"""A native topic -> the map's role that stands for it (the first role listed)."""
-TF_TOPICS = ("/tf", "/tf_static")
+__all__ = [  # the names compile, doctor and inspect import from here
+    "ROLES",
+    "ROLE_OF",
+    "TF_TOPICS",
+    "BagSource",
+    "TopicMap",
+    "compressed_depth",
+    "load_topic_map",
+    "open_bag",
+    "parse_topic_map",
+    "read_ros2_bag",
+    "resolve_bag",
+]
+
 FRAME_MATCH_NS = 20_000_000
 """A depth image belongs to the colour image whose stamp is this close [ns] (20 ms)."""
-
-
-@dataclass(frozen=True, slots=True)
-class TopicMap:
-    """A parsed, checked topic map."""
-
-    path: Path | None
-    """The map file, or None when built in code."""
-    scene: str
-    """The scene: a built-in name, or the path of a scene.yaml (resolved)."""
-    world_frame: str
-    """The fixed frame of poses and transforms."""
-    topics: dict[str, str]
-    """Role (``color``, ``poi``, ...) -> topic."""
-    depth_scale: float = 0.001
-    """Metres per unit of a 16UC1 depth image."""
-    joints: dict[str, str] = field(default_factory=dict)
-    """A driver's joint name -> the robot file's (``joints`` in the map)."""
-    mark_button: int = 0
-    """The button of a ``sensor_msgs/Joy`` marks topic whose press is a mark."""
-    poi_frame: str | None = None
-    """The POI as a TF frame (``poi: {frame: tool0}``) when no topic holds its pose."""
-
-
-def parse_topic_map(data: dict[str, Any], path: Path | None = None) -> TopicMap:
-    """A map from already schema-valid data (``schemas/topic_map.schema.json``)."""
-    topics: dict[str, str] = {}
-    scale, button, poi_frame = 0.001, 0, None
-    for role, value in data["topics"].items():
-        if isinstance(value, dict) and "frame" in value:  # the POI as a TF frame
-            poi_frame = str(value["frame"]).lstrip("/")
-        elif isinstance(value, dict):
-            topics[role] = str(value["topic"])
-            scale = float(value.get("scale", scale)) if role == "depth" else scale
-            button = int(value.get("button", button)) if role == "marks" else button
-        else:
-            topics[role] = str(value)
-    scene = str(data["scene"])
-    if path is not None and (scene.endswith((".yaml", ".yml")) or "/" in scene):
-        scene = str((path.parent / scene).resolve())
-    joints = {str(k): str(v) for k, v in (data.get("joints") or {}).items()}
-    world = str(data.get("world_frame", "world"))
-    return TopicMap(path, scene, world, topics, scale, joints, button, poi_frame)
-
-
-def load_topic_map(path: str | Path) -> TopicMap:
-    """Read and check a topic map file; SceneError (one line: file, key, line) when bad,
-    or when one topic is given two roles (a topic holds one signal)."""
-    p = Path(path)
-    try:
-        text = p.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(f"{p}: cannot read topic map: {exc}") from None
-    m = parse_topic_map(validate_yaml(text, "topic_map", str(p), SceneError), p)
-    roles: dict[str, str] = {}
-    for role, topic in m.topics.items():
-        if topic in roles:
-            raise SceneError(
-                f"{p}: topics: {topic} is both the map's {roles[topic]} and its {role}; "
-                "give each role its own topic (leave an optional one out)"
-            )
-        roles[topic] = role
-    return m
-
-
-# --- transforms --------------------------------------------------------------------------
-
-
-class _TfBuffer:
-    """Transforms parent -> child over time (``/tf``) and static (``/tf_static``); a frame's
-    pose in the world frame at a time is the chain of the latest transforms up to it."""
-
-    def __init__(self, world: str) -> None:
-        self.world = world
-        self._dynamic: dict[str, tuple[list[int], list[tuple[str, np.ndarray]]]] = {}
-        self._static: dict[str, tuple[str, np.ndarray]] = {}
-
-    def add(self, msg: Any, static: bool) -> None:
-        for tr in msg.transforms:
-            t, r = tr.transform.translation, tr.transform.rotation
-            T = np.eye(4)
-            T[:3, :3] = quat_matrix([r.w, r.x, r.y, r.z])
-            T[:3, 3] = [t.x, t.y, t.z]
-            parent = tr.header.frame_id.lstrip("/")
-            child = tr.child_frame_id.lstrip("/")
-            if static:
-                self._static[child] = (parent, T)
-            else:
-                times, values = self._dynamic.setdefault(child, ([], []))
-                times.append(_ns(tr.header.stamp))
-                values.append((parent, T))
-
-    def chain_times(self, frame: str) -> list[int]:
-        """Every stamp [ns] at which a link between ``frame`` and the world frame moved."""
-        times: set[int] = set()
-        frame = frame.lstrip("/")
-        for _ in range(32):
-            if frame == self.world:
-                break
-            if frame in self._static:
-                frame = self._static[frame][0]
-            elif frame in self._dynamic:
-                stamps, values = self._dynamic[frame]
-                times.update(stamps)
-                frame = values[-1][0]
-            else:
-                break
-        return sorted(times)
-
-    def lookup(self, frame: str, t_ns: int) -> np.ndarray | None:
-        """T_world_frame at ``t_ns`` (the latest transform of each link at or before it, else
-        the first one), or None when the chain does not reach the world frame."""
-        T = np.eye(4)
-        frame = frame.lstrip("/")
-        for _ in range(32):
-            if frame == self.world:
-                return T
-            if frame in self._static:
-                parent, link = self._static[frame]
-            elif frame in self._dynamic:
-                times, values = self._dynamic[frame]
-                i = max(bisect.bisect_right(times, t_ns) - 1, 0)
-                parent, link = values[i]
-            else:
-                return None
-            T = link @ T
-            frame = parent
-        return None
-
-
-def _ns(stamp: Any) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-
-
-# --- reading -----------------------------------------------------------------------------
-
-
-def resolve_bag(path: str | Path) -> Path:
-    """The file or directory to read a bag from: an MCAP file as it is; a bag directory
-    as ``ros2 bag record`` writes it (``metadata.yaml`` and its storage files): its one
-    ``.mcap`` file when it holds only that (the file is self-contained, and keeps the
-    attachments of ``smc export``), else the directory (rosbag2 split into several files,
-    or sqlite3 storage); a ROS 1 ``.bag``. LogError (one line) for anything else."""
-    p = Path(path)
-    if p.is_dir():
-        parts = sorted(p.glob("*.mcap"))
-        if len(parts) == 1 and not list(p.glob("*.db3")):
-            return parts[0]
-        if not (p / "metadata.yaml").is_file():
-            found = ", ".join(q.name for q in sorted(p.iterdir())) or "nothing"
-            raise LogError(f"{p}: a bag directory needs its metadata.yaml (rosbag2), found {found}")
-        return p
-    if not p.is_file():
-        raise LogError(f"{p}: no such file")
-    if p.suffix == ".db3":
-        raise LogError(f"{p}: one file of a sqlite3 bag: give its directory (with metadata.yaml)")
-    listed = _bag_files(p.parent)
-    if p.suffix == ".mcap" and len(listed) > 1 and p.name in listed:
-        raise LogError(
-            f"{p}: one file of a bag split into {len(listed)}: give its directory {p.parent} "
-            "(one demonstration)"
-        )
-    return p
-
-
-def _bag_files(folder: Path) -> list[str]:
-    """The storage files a rosbag2 directory's metadata.yaml lists (none without one)."""
-    import yaml
-
-    try:
-        meta = yaml.safe_load((folder / "metadata.yaml").read_text())
-        return [str(f) for f in meta["rosbag2_bagfile_information"]["relative_file_paths"]]
-    except (OSError, yaml.YAMLError, KeyError, TypeError):
-        return []
-
-
-@dataclass
-class BagSource:
-    """A bag opened for reading: its topics and their types, message counts, smc's
-    attachments and metadata (MCAP files only), its digest, and its messages decoded."""
-
-    types: dict[str, str]
-    """Topic -> message type (``sensor_msgs/msg/Image``)."""
-    counts: dict[str, int]
-    attachments: dict[str, bytes]
-    metadata: dict[str, dict[str, str]]
-    sha256: str
-    start_ns: int
-    """Log time of its first message [ns]."""
-    end_ns: int
-    """Log time of its last message [ns]."""
-    messages: Callable[[list[str]], Iterator[tuple[str, int, Any]]]
-    """Topics -> (topic, log time [ns], decoded message) in log-time order."""
-    close: Callable[[], None] = lambda: None
-
-
-def _open_mcap(path: Path) -> BagSource:
-    """A ROS 2 bag in one MCAP file, decoded from the definitions it stores
-    (``mcap-ros2-support``: it also gives the attachments ``smc export`` writes)."""
-    data = path.read_bytes()
-    try:
-        reader = make_reader(io.BytesIO(data), decoder_factories=[DecoderFactory()])
-        summary = reader.get_summary()
-        attachments = {a.name: bytes(a.data) for a in reader.iter_attachments()}
-        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-    except (McapError, ValueError, EOFError, KeyError) as exc:
-        raise LogError(f"{path}: not a readable MCAP file ({exc})") from None
-    if summary is None or not summary.channels:
-        raise LogError(f"{path}: the bag holds no topics")
-    types = {}
-    for c in summary.channels.values():
-        schema = summary.schemas[c.schema_id]
-        ros2 = schema.encoding == "ros2msg"
-        types[c.topic] = schema.name if ros2 else f"{schema.name} ({schema.encoding}, not ROS 2)"
-    counts: dict[str, int] = {}
-    stats = summary.statistics
-    if stats is not None:
-        for cid, n in stats.channel_message_counts.items():
-            counts[summary.channels[cid].topic] = n
-
-    def messages(topics: list[str]) -> Iterator[tuple[str, int, Any]]:
-        for _schema, channel, message, decoded in reader.iter_decoded_messages(
-            topics=topics, log_time_order=True
-        ):
-            yield channel.topic, message.log_time, decoded
-
-    sha = hashlib.sha256(data).hexdigest()
-    t0, t1 = (stats.message_start_time, stats.message_end_time) if stats else (0, 0)
-    return BagSource(types, counts, attachments, metadata, sha, t0, t1, messages)
-
-
-def _open_rosbags(path: Path) -> BagSource:
-    """A rosbag2 directory (sqlite3 or MCAP storage, any number of files) or a ROS 1 bag,
-    read with ``rosbags``: messages decoded from the definitions the bag stores, else
-    (a sqlite3 bag before Iron stores none) from ROS 2 Humble's standard types."""
-    from rosbags.highlevel import AnyReader
-    from rosbags.interfaces import Connection
-    from rosbags.typesys import Stores, get_typestore
-
-    try:
-        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-        reader.open()
-    except Exception as exc:  # rosbags' own errors name the file's problem
-        raise LogError(f"{path}: not a readable bag ({type(exc).__name__}: {exc})") from None
-    conns: dict[str, list[Connection]] = {}
-    for c in reader.connections:
-        conns.setdefault(c.topic, []).append(c)
-    if not conns:
-        reader.close()
-        raise LogError(f"{path}: the bag holds no topics")
-    types = {t: cs[0].msgtype for t, cs in conns.items()}
-    counts = {t: sum(c.msgcount for c in cs) for t, cs in conns.items()}
-    files = [path] if path.is_file() else sorted(q for q in path.iterdir() if q.is_file())
-    h = hashlib.sha256()
-    for f in files:
-        h.update(f.read_bytes())
-
-    def messages(topics: list[str]) -> Iterator[tuple[str, int, Any]]:
-        wanted = [c for t in topics for c in conns.get(t, [])]
-        for conn, t_ns, raw in reader.messages(connections=wanted):
-            try:
-                msg = reader.deserialize(raw, conn.msgtype)
-            except Exception as exc:  # a message its definition does not fit
-                raise ValueError(f"{conn.topic}: {type(exc).__name__}: {exc}") from None
-            yield conn.topic, t_ns, msg
-
-    t0, t1 = reader.start_time, reader.end_time
-    return BagSource(types, counts, {}, {}, h.hexdigest(), t0, t1, messages, reader.close)
-
-
-def open_bag(path: Path) -> BagSource:
-    """A bag resolved by :func:`resolve_bag`, opened: a rosbag2 directory or a ROS 1 bag
-    through rosbags, an MCAP file through mcap-ros2-support. Close it when done."""
-    return _open_rosbags(path) if path.is_dir() or path.suffix == ".bag" else _open_mcap(path)
 
 
 def read_ros2_bag(
@@ -441,11 +166,14 @@ class _Builder:
         """The bag's first message [ns]: a Log's times are seconds from it, as a person
         reads them (stamps stay absolute for the transforms)."""
         self.role = {topic: role for role, topic in m.topics.items()}
-        self.tf = _TfBuffer(m.world_frame)
+        self.tf = TfBuffer(m.world_frame)
         self.targets: list[tuple[float, np.ndarray]] = []
         self.grip: list[tuple[float, float]] = []
         self.joint_msgs: list[tuple[float, tuple[str, ...], np.ndarray, np.ndarray, np.ndarray]]
         self.joint_msgs = []  # (t, names, position, velocity, effort) of each message
+        self.driver_of: dict[str, str] = {}
+        """A robot joint -> the driver's name read as it."""
+        self.names_seen: set[tuple[str, ...]] = set()
         self.joints: list[JointState] = []
         self.buttons_down = False
         self.poi_t: list[float] = []
@@ -475,22 +203,14 @@ class _Builder:
         elif role == "gripper_command":
             self.grip.append((t, float(msg.data)))
         elif role == "joint_states":
-            n = len(msg.name)
-            names = tuple(self.map.joints.get(str(j), str(j)) for j in msg.name)
-
-            def column(values: Any) -> np.ndarray:  # velocity and effort may be left empty
-                return np.array(values, dtype=float) if len(values) == n else np.zeros(n)
-
-            self.joint_msgs.append(
-                (t, names, column(msg.position), column(msg.velocity), column(msg.effort))
-            )
+            self._joint_state(t, msg)
         elif role == "color":
-            self.color.append((_ns(msg.header.stamp), msg.header.frame_id, msg))
+            self.color.append((stamp_ns(msg.header.stamp), msg.header.frame_id, msg))
         elif role == "depth":
-            self.depth.append((_ns(msg.header.stamp), msg))
+            self.depth.append((stamp_ns(msg.header.stamp), msg))
         elif role == "camera_info":
             k = msg.k if hasattr(msg, "k") else msg.K  # ROS 1 names it K
-            self.info.append((_ns(msg.header.stamp), np.array(k, dtype=float).reshape(3, 3)))
+            self.info.append((stamp_ns(msg.header.stamp), np.array(k, dtype=float).reshape(3, 3)))
         elif role == "weight":
             self.weight_t.append(t)
             self.weight.append(float(msg.data))
@@ -513,6 +233,30 @@ class _Builder:
             self.scans.append(
                 Scan(t, float(msg.angle_min), float(end), ranges, msg.header.frame_id)
             )
+
+    def _joint_state(self, t: float, msg: Any) -> None:
+        """A JointState, its names renamed by the map's ``joints``; LogError when two of the
+        driver's names read as one robot joint (a name the map gives another joint)."""
+        n = len(msg.name)
+        driver = tuple(str(j) for j in msg.name)
+        names = tuple(self.map.joints.get(j, j) for j in driver)
+        if driver not in self.names_seen:
+            self.names_seen.add(driver)
+            for d, ours in zip(driver, names, strict=True):
+                first = self.driver_of.setdefault(ours, d)
+                if first != d:
+                    raise LogError(
+                        f"{self.path}: topic {self.map.topics['joint_states']}: joints {first} "
+                        f"and {d} both read as robot joint {ours} (`joints:` in "
+                        f"{self.map.path or 'the topic map'}); map one driver joint to each"
+                    )
+
+        def column(values: Any) -> np.ndarray:  # velocity and effort may be left empty
+            return np.array(values, dtype=float) if len(values) == n else np.zeros(n)
+
+        self.joint_msgs.append(
+            (t, names, column(msg.position), column(msg.velocity), column(msg.effort))
+        )
 
     def seconds(self, t_ns: int) -> float:
         """A time of the bag [ns] in seconds from its first message."""
@@ -555,10 +299,11 @@ class _Builder:
         """T_world_frame of a message's ``header`` (frame and stamp); LogError without a
         chain of transforms to the world frame."""
         frame = header.frame_id or self.map.world_frame
-        W = self.tf.lookup(frame, _ns(header.stamp))
+        t_ns = stamp_ns(header.stamp)
+        W = self.tf.lookup(frame, t_ns)
         if W is None:
             raise LogError(
-                f"{self.path}: {topic} at t={self.seconds(_ns(header.stamp)):.3f} s: no transform "
+                f"{self.path}: {topic} at t={self.seconds(t_ns):.3f} s: no transform "
                 f"from frame {frame!r} to {self.map.world_frame!r} in /tf or /tf_static"
             )
         return W
@@ -627,8 +372,6 @@ class _Builder:
     def frames(self) -> list[CameraFrame]:
         """Colour images joined with the depth of the same stamp, the latest camera info
         and the camera's pose from the transforms."""
-        from smccli.logs.topics import decode_color
-
         depth_t = np.array([t for t, _ in self.depth], dtype=np.int64)
         info_t = [t for t, _ in self.info]
         out: list[CameraFrame] = []
@@ -645,8 +388,9 @@ class _Builder:
                 untransformed.add(frame_id or "''")
             if lacks_depth or not self.info or T is None:
                 continue
-            rgb = self._rgb(msg, decode_color)
-            depth = self._depth(self.depth[i][1], rgb.shape[:2])
+            rgb = ros_rgb(msg, f"{self.path}: {self.map.topics['color']}")
+            where = f"{self.path}: {self.map.topics['depth']}"
+            depth = ros_depth(self.depth[i][1], rgb.shape[:2], self.map.depth_scale, where)
             K = self.info[max(k, 0)][1]
             out.append(CameraFrame(self.seconds(t_ns), rgb, depth, K, T, frame_id))
         why = []
@@ -668,101 +412,3 @@ class _Builder:
                 + "; ".join(why)
             )
         return out
-
-    def _rgb(self, msg: Any, decode_color: Callable[[bytes], np.ndarray | None]) -> np.ndarray:
-        topic = self.map.topics["color"]
-        if hasattr(msg, "format"):  # CompressedImage
-            rgb = decode_color(bytes(msg.data))
-            if rgb is None:
-                raise LogError(
-                    f"{self.path}: {topic}: image does not decode (format {msg.format!r})"
-                )
-            return rgb
-        enc = msg.encoding.lower()
-        if enc not in ("rgb8", "bgr8"):
-            raise LogError(
-                f"{self.path}: {topic}: encoding {msg.encoding!r}, expected rgb8 or bgr8"
-            )
-        img = _rows(msg, 3, np.uint8)
-        return img[:, :, ::-1].copy() if enc == "bgr8" else img
-
-    def _depth(self, msg: Any, shape: tuple[int, ...]) -> np.ndarray:
-        topic = self.map.topics["depth"]
-        if hasattr(msg, "format"):  # CompressedImage
-            depth = compressed_depth(bytes(msg.data), msg.format, self.map.depth_scale)
-            if isinstance(depth, str):
-                raise LogError(f"{self.path}: {topic}: {depth}")
-            if depth.shape != shape:
-                raise LogError(
-                    f"{self.path}: {topic}: depth {depth.shape[1]}x{depth.shape[0]} differs "
-                    f"from the colour image's {shape[1]}x{shape[0]}"
-                )
-            return depth
-        enc = msg.encoding.upper()
-        if enc == "16UC1":
-            img = _rows(msg, 1, np.dtype("<u2") if not msg.is_bigendian else np.dtype(">u2"))
-            # In float64, then float32: for millimetres with scale 0.001 this equals the native
-            # reader's mm / 1000 for every 16-bit value (float32 * 0.001 differs for 38850).
-            depth = (img.astype(np.float64) * self.map.depth_scale).astype(np.float32)
-        elif enc == "32FC1":
-            img = _rows(msg, 1, np.dtype("<f4") if not msg.is_bigendian else np.dtype(">f4"))
-            depth = np.nan_to_num(img.astype(np.float32), nan=0.0, posinf=0.0)
-        else:
-            raise LogError(
-                f"{self.path}: {topic}: encoding {msg.encoding!r}, expected 16UC1 or 32FC1"
-            )
-        depth = depth.reshape(msg.height, msg.width)
-        if depth.shape != shape:
-            raise LogError(
-                f"{self.path}: {topic}: depth {msg.width}x{msg.height} differs from the colour "
-                f"image's {shape[1]}x{shape[0]}"
-            )
-        return depth
-
-
-COMPRESSED_DEPTH_HEADER = struct.Struct("<iff")
-"""image_transport's compressedDepth header before the PNG: the format (-1 undefined, 0
-inverse depth) and the two quantisation parameters of a 32FC1 image's inverse depth."""
-
-
-def compressed_depth(data: bytes, fmt: str, scale: float) -> np.ndarray | str:
-    """A ``compressedDepth`` CompressedImage (image_transport's plugin, as RealSense users
-    record depth) -> depth [m], float32 (h, w), 0 where there is none; or why it cannot be
-    read (one line). 16UC1 is the PNG's values times ``scale``; 32FC1 is quantised inverse
-    depth: depth = a / (v - b) for v > 0, a and b from the header."""
-    import cv2
-
-    kind = fmt.lower()
-    if "compresseddepth" not in kind:
-        return f"format {fmt!r}: a depth CompressedImage must be compressedDepth (PNG)"
-    if "rvl" in kind:
-        return (
-            f"format {fmt!r}: compressedDepth RVL is not read; record with the plugin's "
-            "format png, or republish the depth raw"
-        )
-    n = COMPRESSED_DEPTH_HEADER.size
-    if len(data) <= n:
-        return f"format {fmt!r}: {len(data)} bytes, no image after the {n}-byte header"
-    _, a, b = COMPRESSED_DEPTH_HEADER.unpack(data[:n])
-    img = cv2.imdecode(np.frombuffer(data[n:], dtype=np.uint8), cv2.IMREAD_UNCHANGED)
-    if img is None or img.dtype != np.uint16 or img.ndim != 2:
-        return f"format {fmt!r}: the image after the header is not a 16-bit PNG"
-    encoding = fmt.split(";")[0].strip().upper()
-    if encoding == "16UC1":
-        # In float64, then float32, as a raw 16UC1 image (the same values to the bit).
-        return (img.astype(np.float64) * scale).astype(np.float32)
-    if encoding == "32FC1":
-        v = img.astype(np.float32)
-        with np.errstate(divide="ignore"):
-            depth = np.where(v > 0, np.float32(a) / (v - np.float32(b)), 0.0)
-        return np.nan_to_num(depth.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
-    return f"format {fmt!r}: encoding {encoding!r}, expected 16UC1 or 32FC1"
-
-
-def _rows(msg: Any, channels: int, dtype: Any) -> np.ndarray:
-    """The pixels of a sensor_msgs/Image, rows of ``step`` bytes (padding dropped)."""
-    dt = np.dtype(dtype)
-    row = msg.width * channels * dt.itemsize
-    raw = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.step)[:, :row]
-    img = raw.copy().view(dt).reshape(msg.height, msg.width, channels)
-    return img[:, :, 0] if channels == 1 else img

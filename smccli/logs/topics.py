@@ -102,7 +102,7 @@ def json_schema_name(topic: str) -> str:
 @functools.cache
 def json_validator(topic: str) -> Any:
     """The topic's JSON Schema validator, built once per topic (writing and reading)."""
-    import jsonschema  # imported on first use (~60 ms)
+    import jsonschema  # imported on first use: slow to import, and most commands never validate
 
     schema = json.loads(json_schema_bytes(topic))
     return jsonschema.Draft202012Validator(schema)
