@@ -49,7 +49,8 @@ from smccli.perception import (  # noqa: E402
     salient_cluster,
 )
 from smccli.perception.cloud import object_points  # noqa: E402
-from smccli.perception.clusters import cut_points, describe_cluster  # noqa: E402
+from smccli.perception.clusters import describe_cluster  # noqa: E402
+from smccli.perception.segment import cut_points  # noqa: E402
 from smccli.schemas import parse_yaml, schema_problem  # noqa: E402
 from smccli.world.scene import SCENES_DIR, load_scene  # noqa: E402
 from smccli.world.sensors import CameraFrame  # noqa: E402

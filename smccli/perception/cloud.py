@@ -156,6 +156,12 @@ def plane_distance(points: np.ndarray, plane: np.ndarray) -> np.ndarray:
     return np.einsum("ni,i->n", points, plane[:3]) + plane[3]
 
 
+def heights_above(points: np.ndarray, plane: np.ndarray | None) -> np.ndarray:
+    """Height of points (n, 3) above the table plane, shape (n,) [m]; without a plane,
+    above the lowest point."""
+    return plane_distance(points, plane) if plane is not None else points[:, 2] - points[:, 2].min()
+
+
 def above_plane_mask(points: np.ndarray, plane: np.ndarray, margin: float) -> np.ndarray:
     """Points more than ``margin`` [m] above the plane, boolean mask of shape (n,)."""
     return plane_distance(points, plane) > margin

@@ -144,7 +144,7 @@ class PerceptionParams:
     join_overlap: float = field(default=0.25, metadata={"omit_default": True})
     """Two clusters standing on the same surface whose footprints (convex hulls in x-y,
     each grown by ``join_margin``) share this much of the smaller one's area are parts of
-    one object (:func:`~smccli.perception.clusters.join_split_parts`): two objects cannot
+    one object (:func:`~smccli.perception.segment.join_split_parts`): two objects cannot
     stand on the same floor space, but a noisy camera's holes along an open box's 1 cm
     walls cut the box into its floor and its near walls (measured on 40-layout start
     frames of six scenes: 0.46-1.0 between such parts, 0.21-0.45 between a pyramid and its
@@ -166,10 +166,10 @@ class PerceptionParams:
 def scene_perception(scene: Scene) -> PerceptionParams:
     """The perception settings a scene's trees start with: the defaults with the scene
     file's ``perception`` section; an arm's crop box, unless the scene sets it, from its
-    reach and its objects (:func:`~smccli.perception.workspace.workspace_box`)."""
+    reach and its objects (:func:`~smccli.perception.reach.workspace_box`)."""
     settings: dict[str, Any] = dict(scene.perception)
     if scene.robot.base is None and scene.robot.arm_joints:
-        from smccli.perception.workspace import workspace_box
+        from smccli.perception.reach import workspace_box
 
         lo, hi = workspace_box(scene)
         settings.setdefault("crop_min", lo)
