@@ -443,6 +443,14 @@ def test_salient_cluster_is_the_nearest_within_epsilon():
     assert salient_cluster(cs, np.array([0.6, -0.2 + 0.9 * DEFAULT_EPSILON, 0.8, 1.0])) == 2
 
 
+def test_default_epsilon_is_the_trees_default():
+    """One saliency radius: what a tree compiles with unless told otherwise, and what
+    ``salient_cluster`` takes by default."""
+    from smccli.learn.params import SmcParams
+
+    assert SmcParams().epsilon == DEFAULT_EPSILON
+
+
 def test_salient_cluster_on_a_rendered_grasp(scene):
     scene.clear()
     truth = {
