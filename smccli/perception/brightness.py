@@ -26,7 +26,7 @@ The distance term is the log-ratio (:func:`smccli.perception.distance.d_cluster`
 the extents'. NaN where there is no table to compare with (a mobile manipulator's
 shelves, a tree from before this term) or too little of the sides: the term is then left
 out, and at a decision such a view ranks after the measured ones
-(:func:`smccli.execute.policy.match_edges`).
+(:func:`smccli.learn.contingency.match_stack`).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from nearly above, its sides a few pixels tall and eaten by the depth camera's e
 holes): the brightness is unknown, NaN. Using all the points then (the top included)
 made the grey bar near the camera brighter than the white box (1.17-1.24 against
 0.91-0.98 in 6 of 300 trials' frames, issue 27); an unknown one ranks after the
-objects whose brightness is measured (:func:`smccli.execute.policy.match_edges`)."""
+objects whose brightness is measured (:func:`smccli.learn.contingency.match_stack`)."""
 SIDE_BAND = (0.25, 0.75)
 """The side faces' points between these fractions of the object's height: above the
 table's contact shadow and below the top's edge, where depth noise and edge holes mix
