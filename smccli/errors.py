@@ -33,4 +33,3 @@ class OutputError(SmcError):
 
 class OutputExistsError(OutputError):
     """An output file exists and ``--force`` was not given."""
-

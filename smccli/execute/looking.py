@@ -1,4 +1,4 @@
-"""Looking again while an arm acts on an object (issue 27): where the object went, and the
+"""Looking again while an arm acts on an object: where the object went, and the
 rest of the path bent onto its new goal.
 
 The executor looks every :data:`LOOK_PERIOD` through a crop box around the object

@@ -226,15 +226,22 @@ class StoredStack:
     """(E,) bool: the SMC has a scale reading."""
     weight: np.ndarray
     """(E,): stored weight [kg] (0 without)."""
+    rows: np.ndarray
+    """(E,) int: 0, 1, ..., E - 1 (to pick each row's matched cluster)."""
+    every_cluster: bool
+    """Every SMC has a cluster (nothing to mask)."""
 
     @classmethod
     def build(cls, stored: Sequence[SalientPerceptions]) -> StoredStack:
         weights = [s.weight for s in stored]
+        has_cluster = np.array([s.cluster is not None for s in stored], dtype=bool)
         return cls(
             clusters=ClusterTerms.of([s.cluster for s in stored]),
-            has_cluster=np.array([s.cluster is not None for s in stored], dtype=bool),
+            has_cluster=has_cluster,
             has_weight=np.array([w is not None for w in weights], dtype=bool),
             weight=np.array([0.0 if w is None else float(w) for w in weights]),
+            rows=np.arange(len(stored)),
+            every_cluster=bool(has_cluster.all()),
         )
 
 
@@ -250,22 +257,22 @@ def match_stack(
     perception, in :func:`ranked` order (eq. 39): at a decision point the POI has not
     moved yet, so nearness to it cannot choose.
     """
-    n = len(stack.has_cluster)
-    d = np.zeros(n)
-    idx = np.full(n, -1, dtype=np.int64)
-    if stack.has_cluster.any():
-        if clusters:
-            pp = params.perception
-            seen = ClusterTerms.of(clusters)
-            dc = d_cluster_matrix(stack.clusters, seen, pp)  # (E, C)
-            rank = dc
-            if pp.brightness_scale > 0:
-                rank = ranked(dc, unmeasured(stack.clusters, seen, pp), params.t_hp)
-            best = np.argmin(rank, axis=1)
-            d = np.where(stack.has_cluster, dc[np.arange(n), best], 0.0)
-            idx = np.where(stack.has_cluster, best, -1)
-        else:
-            d = np.where(stack.has_cluster, np.inf, 0.0)
+    n = len(stack.rows)
+    if not clusters or not stack.has_cluster.any():
+        d = np.where(stack.has_cluster, np.inf, 0.0)
+        idx = np.full(n, -1, dtype=np.int64)
+    else:
+        pp = params.perception
+        seen = ClusterTerms.of(clusters)
+        dc = d_cluster_matrix(stack.clusters, seen, pp)  # (E, C)
+        rank = dc
+        if pp.brightness_scale > 0:
+            rank = ranked(dc, unmeasured(stack.clusters, seen, pp), params.t_hp)
+        idx = np.argmin(rank, axis=1)
+        d = dc[stack.rows, idx]
+        if not stack.every_cluster:
+            d = np.where(stack.has_cluster, d, 0.0)
+            idx = np.where(stack.has_cluster, idx, -1)
     if stack.has_weight.any():
         if weight is None:
             d = np.where(stack.has_weight, np.inf, d)

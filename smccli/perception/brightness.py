@@ -3,7 +3,7 @@
 The colour histogram (:mod:`smccli.perception.histogram`) bins achromatic pixels by their
 absolute brightness, and a real camera's exposure and white balance move that from one
 episode to the next: a grey bar seen at a high exposure fills the same bins as a white box
-seen at a low one (issue 27). Their gain cancels in a ratio of two surfaces seen in the
+seen at a low one. Their gain cancels in a ratio of two surfaces seen in the
 same frame, so the object is compared with the table (the reference surface perception
 already fits) around it:
 
@@ -12,9 +12,8 @@ already fits) around it:
 
 - **The middle of the side faces, not the top.** A white top under the lamp saturates the
   sensor (and a grey one does at the highest exposures): the ratio of two clipped tops says
-  nothing. The sides are lit less and are not clipped. Measured on the look-alike bench (40
-  layouts, realistic sensors): white box 0.78-1.11, grey bar 0.50-0.70, where the tops
-  overlap (1.21-1.57 against 1.12-1.22). Where too little of the sides is seen (a flat
+  nothing. The sides are lit less and are not clipped, and they tell a white box from a
+  grey bar where the tops overlap (docs/choices.md). Where too little of the sides is seen (a flat
   object, a box right under the camera) the brightness is unknown (NaN): such an object
   is taken only where none whose brightness is measured matches.
 - **The table ring, not the whole table.** The lamp is a spot light: the table's brightness

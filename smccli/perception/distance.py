@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -35,7 +36,7 @@ def d_extents(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(log_extents(a) - log_extents(b))))
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True)
 class ClusterTerms:
     """What :func:`d_cluster_matrix` compares of N clusters, stacked (some rows may stand
     for no cluster: zeros and NaN there, for the caller to mask)."""
@@ -44,25 +45,43 @@ class ClusterTerms:
     """(N, H): square root of each normalised colour histogram."""
     log_extents: np.ndarray
     """(N, 3): :func:`log_extents` of each cluster's extents."""
-    log_brightness: np.ndarray
-    """(N,): ln of each relative brightness; NaN where unknown (no table to compare with,
-    a tree from before the term)."""
+    brightness: np.ndarray
+    """(N,): each relative brightness; NaN where unknown (no table to compare with, a tree
+    from before the term)."""
+
+    @cached_property
+    def log_brightness(self) -> np.ndarray:
+        """(N,): ln of :attr:`brightness` (computed once, and only where the term is on)."""
+        return np.log(self.brightness)
 
     @classmethod
     def of(cls, clusters: Sequence[Cluster | None]) -> ClusterTerms:
         """The terms of ``clusters``; a None row holds zeros and a NaN brightness."""
-        n = len(clusters)
-        rows = [i for i, c in enumerate(clusters) if c is not None]
         seen = [c for c in clusters if c is not None]
+        if len(seen) == len(clusters) and seen:  # the context at a decision point
+            return cls._of(seen)
+        n = len(clusters)
         hist = np.zeros((n, len(seen[0].histogram) if seen else 1))
         ext = np.zeros((n, 3))
         bright = np.full(n, np.nan)
         if seen:
-            h = np.array([c.histogram for c in seen], dtype=np.float64)
-            hist[rows] = np.sqrt(h / np.maximum(h.sum(axis=1, keepdims=True), 1e-300))
-            ext[rows] = log_extents(np.array([c.extents for c in seen], dtype=np.float64))
-            bright[rows] = np.log(np.array([c.brightness for c in seen], dtype=np.float64))
-        return cls(sqrt_hist=hist, log_extents=ext, log_brightness=bright)
+            rows = [i for i, c in enumerate(clusters) if c is not None]
+            terms = cls._of(seen)
+            hist[rows], ext[rows], bright[rows] = (
+                terms.sqrt_hist,
+                terms.log_extents,
+                terms.brightness,
+            )
+        return cls(sqrt_hist=hist, log_extents=ext, brightness=bright)
+
+    @classmethod
+    def _of(cls, clusters: Sequence[Cluster]) -> ClusterTerms:
+        h = np.array([c.histogram for c in clusters], dtype=np.float64)
+        return cls(
+            sqrt_hist=np.sqrt(h / np.maximum(h.sum(axis=1, keepdims=True), 1e-300)),
+            log_extents=log_extents(np.array([c.extents for c in clusters], dtype=np.float64)),
+            brightness=np.array([c.brightness for c in clusters], dtype=np.float64),
+        )
 
 
 def d_cluster_matrix(a: ClusterTerms, b: ClusterTerms, params: PerceptionParams) -> np.ndarray:
@@ -90,14 +109,14 @@ def unmeasured(stored: ClusterTerms, seen: ClusterTerms, params: PerceptionParam
     """(A, B) bool: a term of a ``stored`` cluster that the ``seen`` one could not measure
     (its brightness: a box seen from right above, its sides out of sight)."""
     if params.brightness_scale <= 0:
-        return np.zeros((len(stored.log_brightness), len(seen.log_brightness)), dtype=bool)
-    return ~np.isnan(stored.log_brightness)[:, None] & np.isnan(seen.log_brightness)[None, :]
+        return np.zeros((len(stored.brightness), len(seen.brightness)), dtype=bool)
+    return ~np.isnan(stored.brightness)[:, None] & np.isnan(seen.brightness)[None, :]
 
 
 def d_cluster(a: Cluster, b: Cluster, params: PerceptionParams | None = None) -> float:
     """Perception distance of two object clusters: :func:`d_cluster_matrix` of one each."""
     params = params or PerceptionParams()
-    return float(d_cluster_matrix(ClusterTerms.of([a]), ClusterTerms.of([b]), params)[0, 0])
+    return float(d_cluster_matrix(ClusterTerms._of([a]), ClusterTerms._of([b]), params)[0, 0])
 
 
 def d_scalar(a: float, b: float, scale: float) -> float:
