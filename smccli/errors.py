@@ -33,9 +33,3 @@ class OutputError(SmcError):
 
 class OutputExistsError(OutputError):
     """An output file exists and ``--force`` was not given."""
-
-
-class NoContingentSmc(SmcError):
-    """Replay found no child SMC contingent with the current perceptions (Algorithm 2)."""
-
-    exit_code = 1

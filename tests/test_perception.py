@@ -49,7 +49,8 @@ from smccli.perception import (  # noqa: E402
     salient_cluster,
 )
 from smccli.perception.cloud import object_points  # noqa: E402
-from smccli.perception.clusters import cut_points, describe_cluster  # noqa: E402
+from smccli.perception.clusters import describe_cluster  # noqa: E402
+from smccli.perception.segment import cut_points  # noqa: E402
 from smccli.schemas import parse_yaml, schema_problem  # noqa: E402
 from smccli.world.scene import SCENES_DIR, load_scene  # noqa: E402
 from smccli.world.sensors import CameraFrame  # noqa: E402
@@ -390,6 +391,40 @@ def test_d_cluster_ignores_location():
     assert d_cluster(a, b) == 0.0
 
 
+def test_d_cluster_sums_its_terms_over_their_scales():
+    """-ln BC / hist_scale + max |ln(extent ratio)| / extent_scale (+ |ln(brightness
+    ratio)| / brightness_scale where both are known and the term is on)."""
+    p = dataclasses.replace(_PARAMS, brightness_scale=4.0)
+    h1, h2 = np.r_[np.ones(12), np.zeros(12)], np.r_[np.zeros(6), np.ones(12), np.zeros(6)]
+    a = dataclasses.replace(_cluster(h1, np.array([0.1, 0.05, 0.05])), brightness=1.0)
+    b = dataclasses.replace(_cluster(h2, np.array([0.1, 0.04, 0.06])), brightness=2.0)
+    d_h = -np.log(0.5) / p.hist_scale  # half of each histogram in common: BC = 0.5
+    d_e = np.log(0.05 / 0.04) / p.extent_scale
+    assert d_cluster(a, b, p) == pytest.approx(d_h + d_e + np.log(2.0) / p.brightness_scale)
+    unknown = dataclasses.replace(b, brightness=float("nan"))
+    assert d_cluster(a, unknown, p) == pytest.approx(d_h + d_e)
+    assert d_cluster(a, b, _PARAMS) == pytest.approx(d_h + d_e)  # the term off
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.tuples(_hist, _ext), min_size=1, max_size=4), st.lists(_hist, min_size=1))
+def test_the_distance_matrix_is_d_cluster_pairwise(rows, hists):
+    """One implementation: :func:`d_cluster` is the 1 x 1 case of the matrix a decision
+    point computes, and each entry of the matrix is the pair's :func:`d_cluster`."""
+    from smccli.perception.distance import ClusterTerms, d_cluster_matrix, unmeasured
+
+    p = dataclasses.replace(_PARAMS, brightness_scale=4.0)
+    a = [dataclasses.replace(_cluster(h, e), brightness=1.0 + k) for k, (h, e) in enumerate(rows)]
+    b = [_cluster(h, np.array([0.05, 0.04, 0.03])) for h in hists]  # brightness unknown
+    m = d_cluster_matrix(ClusterTerms.of(a), ClusterTerms.of(b), p)
+    assert m.shape == (len(a), len(b))
+    for i, j in np.ndindex(m.shape):
+        assert m[i, j] == pytest.approx(d_cluster(a[i], b[j], p), abs=1e-12)
+    assert unmeasured(ClusterTerms.of(a), ClusterTerms.of(b), p).all()
+    assert not unmeasured(ClusterTerms.of(b), ClusterTerms.of(a), p).any()
+    assert not unmeasured(ClusterTerms.of(a), ClusterTerms.of(b), _PARAMS).any()
+
+
 def test_d_histogram_is_the_textbook_bhattacharyya():
     p = np.array([0.5, 0.5, 0.0])
     q = np.array([0.0, 0.5, 0.5])
@@ -440,6 +475,14 @@ def test_salient_cluster_is_the_nearest_within_epsilon():
     assert salient_cluster(cs, np.array([0.5, 0.0, 0.8]), epsilon=0.15) == 0
     assert salient_cluster((), np.zeros(3)) is None
     assert salient_cluster(cs, np.array([0.6, -0.2 + 0.9 * DEFAULT_EPSILON, 0.8, 1.0])) == 2
+
+
+def test_default_epsilon_is_the_trees_default():
+    """One saliency radius: what a tree compiles with unless told otherwise, and what
+    ``salient_cluster`` takes by default."""
+    from smccli.learn.params import SmcParams
+
+    assert SmcParams().epsilon == DEFAULT_EPSILON
 
 
 def test_salient_cluster_on_a_rendered_grasp(scene):

@@ -23,8 +23,8 @@ from smccli.execute.episode import (  # noqa: E402
     resolve,
     run_episode,
 )
-from smccli.execute.executor import EdgeStack, equivalent, match_edges  # noqa: E402
-from smccli.learn.contingency import match_context  # noqa: E402
+from smccli.execute.matching import EdgeStack, equivalent, match_edges  # noqa: E402
+from smccli.learn.contingency import ranked  # noqa: E402
 from smccli.logs import read_log, strip_topic  # noqa: E402
 from smccli.world.sim import Sim  # noqa: E402
 from smccli.world.truth import Truth  # noqa: E402
@@ -88,7 +88,34 @@ def test_episode_on_a_new_layout_succeeds_and_logs_decisions(bench, tmp_path):
     assert np.hypot(*(np.array(first["mapped_goal"][:2]) - box[:2])) < 0.01
 
 
-def test_vectorised_match_equals_match_context(tmp_path_factory, bench):
+def _match_one(stored, clusters, weight, params) -> tuple[float, int | None]:
+    """C_Now of a context against one stored SMC written out from its definition (eq. 36,
+    39): the cluster D_P of each seen cluster (:func:`d_cluster`), the first in
+    :func:`ranked` order, plus the scale's term."""
+    import math
+
+    from smccli.perception import d_cluster
+
+    d, index = 0.0, None
+    if stored.cluster is not None:
+        pp = params.perception
+        ds = np.array([d_cluster(c, stored.cluster, pp) for c in clusters])
+        unmeasured = np.array(
+            [
+                pp.brightness_scale > 0
+                and math.isnan(c.brightness)
+                and not math.isnan(stored.cluster.brightness)
+                for c in clusters
+            ]
+        )
+        index = int(np.argmin(ranked(ds, unmeasured, params.t_hp)))
+        d = float(ds[index])
+    if stored.weight is not None:
+        d += abs(weight - stored.weight) / params.weight_scale
+    return d, index
+
+
+def test_vectorised_match_equals_the_per_edge_definition(tmp_path_factory, bench):
     from smccli.perception import clusters_from_frame
 
     _, tree_path = build(cache_root(tmp_path_factory), "pick_place")
@@ -103,9 +130,9 @@ def test_vectorised_match_equals_match_context(tmp_path_factory, bench):
             stack = EdgeStack.build(edges)
             d, idx = match_edges(stack, clusters, weight, tree.params)
             for i, e in enumerate(edges):
-                m = match_context(e.smc.perception, clusters, weight, tree.params)
-                assert d[i] == pytest.approx(m.d_p, abs=1e-9)
-                assert (None if idx[i] < 0 else idx[i]) == m.cluster_index
+                d_ref, index = _match_one(e.smc.perception, clusters, weight, tree.params)
+                assert d[i] == pytest.approx(d_ref, abs=1e-9)
+                assert (None if idx[i] < 0 else idx[i]) == index
 
 
 def test_no_contingent_smc_lists_distances_and_exits_1(pick_demo1, tmp_path):

@@ -16,8 +16,8 @@ import pytest  # noqa: E402
 
 from smccli.execute.episode import episode, layout_for, resolve  # noqa: E402
 from smccli.perception import cluster_unions, clusters_from_frame, d_cluster  # noqa: E402
-from smccli.perception.clusters import join_split_parts  # noqa: E402
 from smccli.perception.params import PerceptionParams, scene_perception  # noqa: E402
+from smccli.perception.segment import join_split_parts  # noqa: E402
 from smccli.world.scene import load_scene  # noqa: E402
 from smccli.world.sim import Sim  # noqa: E402
 

@@ -5,8 +5,8 @@ np.random.default_rng([S, i]))``, so a campaign gives the same layouts and the s
 whatever the number of workers (each trial starts from the state a fresh simulation has:
 a worker keeps one simulator and resets it; perception and control are deterministic).
 A trial runs on one BLAS thread (numpy's and scipy's OpenBLAS): the workers are the
-parallelism, and idle OpenBLAS threads spinning beside them took a quarter of a trial's
-CPU (measured). Workers are processes of the ``spawn`` context (EGL contexts do not
+parallelism, and idle OpenBLAS threads spinning beside them take CPU from the trials.
+Workers are processes of the ``spawn`` context (EGL contexts do not
 survive ``fork``), or the workers of an existing Dask cluster (``cluster``: its scheduler's
 address), each trial one task. Campaigns write no replay log and render only at decision
 points.

@@ -15,15 +15,9 @@ Honesty (docs/design.md section 2): :class:`TreeExecutor` only sees a
 and never imports :mod:`smccli.execute.evaluation`, which scores the episode afterwards from
 the simulator's truth.
 
-The matching, the frontier and the goal mapping live in :mod:`smccli.execute.policy`; their
-names are re-exported here.
-
-Speed (``smc replay --speed F``): every DMP runs F times faster, its tau divided by F
-(:func:`at_speed`); the floors of a rollout's duration (:data:`MIN_DURATION`, the wrist's
-:data:`MAX_YAW_RATE`), the holds and the gripper's waits stay as they are. The robot files
-give no velocity limits, so the bound is the POI speed the controller tracks well,
-:data:`MAX_POI_SPEED`, against the fastest POI speed the tree's DMPs reach as demonstrated
-(:func:`speed_limit`); :func:`check_speed` refuses a factor beyond it.
+The matching, the frontier and the goal mapping live in :mod:`smccli.execute.policy`, the
+replay speed in :mod:`smccli.execute.speed`, looking again in :mod:`smccli.execute.looking`;
+their names are re-exported here.
 """
 
 from __future__ import annotations
@@ -36,26 +30,23 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from smccli.errors import SmcError
-from smccli.execute.policy import (
-    DURATION_CLIP,
-    LOOK_RADIUS,
-    MAX_YAW_RATE,
-    MIDWAY_PHASE,
-    MIN_DURATION,
-    Candidate,
-    Decision,
-    EdgeStack,
-    Observation,
-    Plan,
-    TreePolicy,
-    equivalent,
-    match_edges,
+from smccli.execute.decision import Candidate, Decision
+from smccli.execute.looking import (
+    LOOK_NEAR,
+    LOOK_PERIOD,
+    check_look_period,
+    look_crop,
+    steer,
 )
+from smccli.execute.matching import EdgeStack, equivalent, match_edges
+from smccli.execute.observation import Observation
+from smccli.execute.plan import DURATION_CLIP, MAX_YAW_RATE, MIDWAY_PHASE, MIN_DURATION, Plan
+from smccli.execute.policy import TreePolicy
 from smccli.execute.sensing import Sensors
-from smccli.learn.dmp import Dmp, min_jerk, rollout
+from smccli.execute.speed import MAX_POI_SPEED, at_speed, check_speed, peak_speed, speed_limit
+from smccli.learn.dmp import rollout
 from smccli.learn.tree import ROOT, Edge, Tree
-from smccli.perception import Cluster, PerceptionParams, clusters_from_frame, scale_reading
+from smccli.perception import Cluster, clusters_from_frame, scale_reading
 from smccli.perception.scan import align_scans
 from smccli.world.controller import reachable
 from smccli.world.geometry import between, compose, se2, se2_pose
@@ -65,6 +56,7 @@ __all__ = [
     "ARRIVAL_TOLERANCE",
     "CONTROL_OUTCOMES",
     "DURATION_CLIP",
+    "LOOK_PERIOD",
     "MAX_HOLD",
     "MAX_POI_SPEED",
     "MAX_YAW_RATE",
@@ -77,13 +69,19 @@ __all__ = [
     "Candidate",
     "Decision",
     "EdgeStack",
+    "Observation",
+    "Plan",
     "TreeExecutor",
+    "TreePolicy",
     "at_speed",
+    "check_look_period",
     "check_speed",
     "equivalent",
+    "look_crop",
     "match_edges",
     "peak_speed",
     "speed_limit",
+    "steer",
 ]
 
 CONTROL_OUTCOMES = ("success", "no_contingent_smc", "target_unreachable", "timeout")
@@ -109,134 +107,6 @@ RELOCALIZE_MIN_FITNESS = 0.3
 within ``inlier_distance`` of the stored scan (the robot still sees the stored place)."""
 RELOCALIZE_MAX_STEP = (0.3, 0.2)
 """Largest correction one alignment may make [m, rad]; a larger one is a wrong match."""
-LOOK_PERIOD = 1.0
-"""While an arm acts on an object, it looks at it again this often [s] (issue 27); 0 = off.
-Each look is a camera frame (15 ms at 320x240) and the clusters of the table around the
-object (12 ms): measured on 80 bench_pick trials with 2 workers, the campaign took 18.7 s
-without looking, 27.0 s at 1 s, 35.7 s at 0.5 s. A push is caught if a look comes before
-the hand is within :data:`LOOK_NEAR` of the object."""
-LOOK_MARGIN = 0.05
-"""A look's crop box reaches this far beyond where the object may have gone [m]: table
-around it for the plane fit and the brightness ring."""
-LOOK_NEAR = 0.06
-"""It stops looking once the hand is this close to where it acts [m]: the fingers hide the
-object and the view would pull the goal onto what is left of it."""
-MAX_POI_SPEED = 0.5
-"""Fastest POI speed a rollout may ask for at ``--speed`` above 1 [m/s]. The robot files
-give no velocity limits; the arm's controller caps joint targets at 2.5 rad/s, and on
-min-jerk moves of 25-32 cm the POI lags its target by 0.6-0.9 cm at a 0.5-0.6 m/s peak,
-1.0-1.5 cm at 0.8-1.0 m/s and 3-9 cm beyond 1.2 m/s (docs/choices.md, "Idle time and
-replay speed"): half the speed where tracking breaks down. A base's force caps saturate
-it at 1 m/s, and its servos lag 9 cm at 0.4 m/s: the same 0.5 m/s is its bound too."""
-
-
-def look_crop(seen: Cluster, params: PerceptionParams) -> PerceptionParams:
-    """The perception settings of a look at ``seen``: the crop box narrowed to the table
-    around it, :data:`~smccli.execute.policy.LOOK_RADIUS` plus :data:`LOOK_MARGIN` beyond
-    its footprint (its z range unchanged). Measured on bench_pick at 320x240: the clusters
-    of the whole box take 45 ms, of this one 12 ms, and the table still dominates it for
-    the plane fit."""
-    half = float(np.max(seen.extents[:2])) / 2 + LOOK_RADIUS + LOOK_MARGIN
-    lo, hi = np.asarray(params.crop_min, float), np.asarray(params.crop_max, float)
-    lo[:2] = np.maximum(lo[:2], seen.centroid[:2] - half)
-    hi[:2] = np.minimum(hi[:2], seen.centroid[:2] + half)
-    return replace(params, crop_min=tuple(lo.tolist()), crop_max=tuple(hi.tolist()))
-
-
-def steer(path: np.ndarray, new: np.ndarray, i: int) -> np.ndarray:
-    """``path`` (n, d) already streamed up to index ``i - 1``, bent onto ``new`` (n, d), the
-    same DMP rolled out to a moved goal: from ``i`` on ``new`` plus the gap at ``i - 1``,
-    faded out with a min-jerk blend so the path stays smooth and ends on the new goal (the
-    moving-target DMP's convergence to a moved goal, docs/dmp.md)."""
-    out = path.copy()
-    n = len(path)
-    if i >= n:
-        return out
-    gap = path[i - 1] - new[i - 1]
-    s = (np.arange(i, n) - (i - 1)) / (n - i)
-    fade = 1.0 - min_jerk(s)
-    out[i:] = new[i:] + fade[:, None] * gap
-    return out
-
-
-# --- speed --------------------------------------------------------------------------------
-
-
-def peak_speed(dmp: Dmp) -> float:
-    """Fastest POI speed of ``dmp`` rolled out as demonstrated (start, goal, duration),
-    positions only [m/s]; 0 for a DMP without positions."""
-    if dmp.n_pos == 0:
-        return 0.0
-    t, y = rollout(dmp)
-    if len(t) < 2:
-        return 0.0
-    v = np.linalg.norm(np.diff(y[:, : dmp.n_pos], axis=0), axis=1) / np.diff(t)
-    return float(np.max(v))
-
-
-def _dmps(tree: Tree) -> list[tuple[str, Dmp]]:
-    out = []
-    for e in tree.edges:
-        a = e.smc.action
-        out.append((e.id, a.dmp))
-        if a.base_dmp is not None:
-            out.append((e.id, a.base_dmp))
-    return out
-
-
-def speed_limit(tree: Tree) -> tuple[float, str | None, float]:
-    """The largest ``--speed`` for ``tree``: (factor, the edge whose DMP is fastest, its
-    demonstrated peak speed [m/s]). The factor is at least 1 (the demonstrated speed was
-    executed by the same controller) and infinite for a tree without moves."""
-    worst, edge = 0.0, None
-    for eid, dmp in _dmps(tree):
-        v = peak_speed(dmp)
-        if v > worst:
-            worst, edge = v, eid
-    if worst <= 0:
-        return math.inf, None, 0.0
-    return max(1.0, MAX_POI_SPEED / worst), edge, worst
-
-
-def check_speed(tree: Tree, speed: float) -> None:
-    """SmcError (one line, exit 2) unless ``0 < speed <= speed_limit(tree)``."""
-    if not (math.isfinite(speed) and speed > 0):
-        raise SmcError(f"--speed must be a positive number, got {speed:g}")
-    if speed == 1.0:
-        return
-    limit, edge, v = speed_limit(tree)
-    if speed > limit + 1e-9:
-        raise SmcError(
-            f"--speed {speed:g} exceeds this tree's limit {limit:.2f}: SMC {edge} peaks at "
-            f"{v:.2f} m/s as demonstrated and the robot's POI is held to {MAX_POI_SPEED} m/s"
-        )
-
-
-def check_look_period(look_period: float) -> None:
-    """SmcError (one line, exit 2) unless ``look_period`` is a number >= 0 [s]."""
-    if not (math.isfinite(look_period) and look_period >= 0):
-        raise SmcError(
-            f"--look-period must be a number of seconds >= 0 (0: never look again), "
-            f"got {look_period:g}"
-        )
-
-
-def at_speed(tree: Tree, speed: float) -> Tree:
-    """``tree`` with every DMP ``speed`` times faster (tau / speed); the same tree at 1."""
-    if speed == 1.0:
-        return tree
-    if not speed > 0:
-        raise ValueError(f"at_speed: expected speed > 0, got {speed}")
-
-    def fast(d: Dmp) -> Dmp:
-        return replace(d, duration=d.duration / speed)
-
-    edges = []
-    for e in tree.edges:
-        a = e.smc.action
-        a = replace(a, dmp=fast(a.dmp), base_dmp=None if a.base_dmp is None else fast(a.base_dmp))
-        edges.append(replace(e, smc=replace(e.smc, action=a)))
-    return replace(tree, edges=tuple(edges))
 
 
 @dataclass(frozen=True, slots=True)

@@ -10,8 +10,7 @@ edited, or that comes from another model or controller, drifts. The verdict: div
 when the POI is ever more than :data:`POI_TOLERANCE` away or a finger more than
 :data:`FINGER_TOLERANCE`: what the robot learns from and does. The other joints are
 reported, not judged: a 7-joint arm's posture may drift along its free (null-space)
-direction with the hand where it was (measured: a sample log recorded by an earlier
-controller, POI within 0.1 mm, arm joints 0.18 rad apart).
+direction with the hand where it was.
 """
 
 from __future__ import annotations
@@ -32,7 +31,7 @@ from smccli.world.sim import Sim
 POI_TOLERANCE = 0.005
 """Largest POI difference [m] (yaw counts as 0.1 m per rad) a log may show and still mean
 what it recorded. Above a finger's width of what a grasp tolerates, well above the
-floating-point noise of another CPU (measured 0 here)."""
+floating-point noise of another CPU."""
 FINGER_TOLERANCE = 0.002
 """Largest finger joint difference [m or rad] of a log that means what it recorded."""
 YAW_WEIGHT = 0.1

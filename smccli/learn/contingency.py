@@ -37,6 +37,7 @@ from smccli.learn.smc import (
     symmetry_rotations,
 )
 from smccli.perception import Cluster, d_cluster
+from smccli.perception.distance import ClusterTerms, d_cluster_matrix, unmeasured
 from smccli.perception.room import d_room
 from smccli.perception.scan import align_scans, chamfer
 from smccli.world.geometry import compose, rotate_z, se2_pose, wrap, wrap_yaw
@@ -202,10 +203,8 @@ def ranked(d: np.ndarray, unmeasured: np.ndarray, t_hp: float) -> np.ndarray:
     contingent ones (D_P < ``t_hp``) whose every term was measured, then the contingent
     ones ``unmeasured`` (bool, same shape: a term the SMC has that this view could not
     measure, e.g. the brightness of a box seen from right above, its sides out of sight),
-    then the rest; by D_P within each. A grey bar right under the camera otherwise matched
-    a white box's SMC better than the white box (issue 27). The D_P itself is unchanged.
-    Used by :func:`match_context` and the vectorised
-    :func:`smccli.execute.policy.match_edges`."""
+    then the rest; by D_P within each. Else a grey bar right under the camera matches a
+    white box's SMC better than the white box. The D_P itself is unchanged."""
     tier = np.where(d < t_hp, np.where(unmeasured, 1.0, 0.0), 2.0)
     return tier * RANK_TIER + d
 
@@ -214,34 +213,83 @@ RANK_TIER = 1e6
 """Larger than any finite D_P: :func:`ranked` orders by tier, then by D_P."""
 
 
+@dataclass(frozen=True, slots=True)
+class StoredStack:
+    """The salient perceptions of E stored SMCs, stacked to match a context against all of
+    them at once (:func:`match_stack`)."""
+
+    clusters: ClusterTerms
+    """E rows: each SMC's localized (cluster) perception (zeros where it has none)."""
+    has_cluster: np.ndarray
+    """(E,) bool: the SMC has a localized (cluster) perception."""
+    has_weight: np.ndarray
+    """(E,) bool: the SMC has a scale reading."""
+    weight: np.ndarray
+    """(E,): stored weight [kg] (0 without)."""
+    rows: np.ndarray
+    """(E,) int: 0, 1, ..., E - 1 (to pick each row's matched cluster)."""
+    every_cluster: bool
+    """Every SMC has a cluster (nothing to mask)."""
+
+    @classmethod
+    def build(cls, stored: Sequence[SalientPerceptions]) -> StoredStack:
+        weights = [s.weight for s in stored]
+        has_cluster = np.array([s.cluster is not None for s in stored], dtype=bool)
+        return cls(
+            clusters=ClusterTerms.of([s.cluster for s in stored]),
+            has_cluster=has_cluster,
+            has_weight=np.array([w is not None for w in weights], dtype=bool),
+            weight=np.array([0.0 if w is None else float(w) for w in weights]),
+            rows=np.arange(len(stored)),
+            every_cluster=bool(has_cluster.all()),
+        )
+
+
+def match_stack(
+    stack: StoredStack, clusters: Sequence[Cluster], weight: float | None, params: SmcParams
+) -> tuple[np.ndarray, np.ndarray]:
+    """C_Now of a context (clusters seen now, scale reading now) against every stacked SMC
+    (eq. 36, 39): D_P (E,) and the index (E,) int of the context cluster taken as each
+    SMC's localized perception, -1 when the SMC has none; inf where the context lacks a
+    reading the SMC has.
+
+    The context's salient localized perception is the cluster nearest the stored one in
+    perception, in :func:`ranked` order (eq. 39): at a decision point the POI has not
+    moved yet, so nearness to it cannot choose.
+    """
+    n = len(stack.rows)
+    if not clusters or not stack.has_cluster.any():
+        d = np.where(stack.has_cluster, np.inf, 0.0)
+        idx = np.full(n, -1, dtype=np.int64)
+    else:
+        pp = params.perception
+        seen = ClusterTerms.of(clusters)
+        dc = d_cluster_matrix(stack.clusters, seen, pp)  # (E, C)
+        rank = dc
+        if pp.brightness_scale > 0:
+            rank = ranked(dc, unmeasured(stack.clusters, seen, pp), params.t_hp)
+        idx = np.argmin(rank, axis=1)
+        d = dc[stack.rows, idx]
+        if not stack.every_cluster:
+            d = np.where(stack.has_cluster, d, 0.0)
+            idx = np.where(stack.has_cluster, idx, -1)
+    if stack.has_weight.any():
+        if weight is None:
+            d = np.where(stack.has_weight, np.inf, d)
+        else:
+            d = d + np.where(
+                stack.has_weight, np.abs(weight - stack.weight) / params.weight_scale, 0.0
+            )
+    return d, idx
+
+
 def match_context(
     stored: SalientPerceptions, clusters: Sequence[Cluster], weight: float | None, params: SmcParams
 ) -> Match:
-    """C_Now of a context (clusters seen now, scale reading now) against a stored SMC.
-
-    The context's salient localized perception is the cluster nearest the stored one in
-    perception (eq. 39): at a decision point the POI has not moved yet, so nearness to it
-    cannot choose.
-    """
-    total = 0.0
-    index: int | None = None
-    if stored.cluster is not None:
-        if not clusters:
-            return Match(d_p=INF, cluster_index=None, contingent=False)
-        dists = [d_cluster(c, stored.cluster, params.perception) for c in clusters]
-        unmeasured = [
-            params.perception.brightness_scale > 0
-            and math.isnan(c.brightness)
-            and not math.isnan(stored.cluster.brightness)
-            for c in clusters
-        ]
-        index = int(np.argmin(ranked(np.array(dists), np.array(unmeasured), params.t_hp)))
-        total += dists[index]
-    if stored.weight is not None:
-        if weight is None:
-            return Match(d_p=INF, cluster_index=index, contingent=False)
-        total += abs(weight - stored.weight) / params.weight_scale
-    return Match(d_p=total, cluster_index=index, contingent=total < params.t_hp)
+    """C_Now of a context against one stored SMC: :func:`match_stack` of one."""
+    d, idx = match_stack(StoredStack.build([stored]), clusters, weight, params)
+    index = None if idx[0] < 0 else int(idx[0])
+    return Match(d_p=float(d[0]), cluster_index=index, contingent=bool(d[0] < params.t_hp))
 
 
 def _mean_cluster(a: Cluster, b: Cluster, wa: float, wb: float) -> Cluster:

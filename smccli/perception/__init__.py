@@ -38,11 +38,9 @@ from smccli.perception.scan import (
 )
 
 # open3d's parallel loops (ICP's normal equations, RANSAC, DBSCAN) reduce in thread order:
-# on 2 threads one pair of lidar scans aligned 40 times gave 17 different transforms (last
-# bits), enough to flip a decision near a threshold from one campaign run to the next.
-# One thread gives the same bits every time, and costs a single episode's alignment about
-# 5 ms (23 -> 28 ms); campaigns run a trial per core anyway. OMP_NUM_THREADS does not reach
-# open3d's own OpenMP (measured: still 21 different of 40); this does.
+# their last bits vary from run to run, enough to flip a decision near a threshold. One
+# thread gives the same bits every time (campaigns run a trial per core anyway).
+# OMP_NUM_THREADS does not reach open3d's own OpenMP; this does.
 o3d.utility.set_max_threads(1)
 
 __all__ = [

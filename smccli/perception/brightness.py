@@ -3,7 +3,7 @@
 The colour histogram (:mod:`smccli.perception.histogram`) bins achromatic pixels by their
 absolute brightness, and a real camera's exposure and white balance move that from one
 episode to the next: a grey bar seen at a high exposure fills the same bins as a white box
-seen at a low one (issue 27). Their gain cancels in a ratio of two surfaces seen in the
+seen at a low one. Their gain cancels in a ratio of two surfaces seen in the
 same frame, so the object is compared with the table (the reference surface perception
 already fits) around it:
 
@@ -12,9 +12,8 @@ already fits) around it:
 
 - **The middle of the side faces, not the top.** A white top under the lamp saturates the
   sensor (and a grey one does at the highest exposures): the ratio of two clipped tops says
-  nothing. The sides are lit less and are not clipped. Measured on the look-alike bench (40
-  layouts, realistic sensors): white box 0.78-1.11, grey bar 0.50-0.70, where the tops
-  overlap (1.21-1.57 against 1.12-1.22). Where too little of the sides is seen (a flat
+  nothing. The sides are lit less and are not clipped, and they tell a white box from a
+  grey bar where the tops overlap (docs/choices.md). Where too little of the sides is seen (a flat
   object, a box right under the camera) the brightness is unknown (NaN): such an object
   is taken only where none whose brightness is measured matches.
 - **The table ring, not the whole table.** The lamp is a spot light: the table's brightness
@@ -26,7 +25,7 @@ The distance term is the log-ratio (:func:`smccli.perception.distance.d_cluster`
 the extents'. NaN where there is no table to compare with (a mobile manipulator's
 shelves, a tree from before this term) or too little of the sides: the term is then left
 out, and at a decision such a view ranks after the measured ones
-(:func:`smccli.execute.policy.match_edges`).
+(:func:`smccli.learn.contingency.match_stack`).
 """
 
 from __future__ import annotations
@@ -42,7 +41,7 @@ from nearly above, its sides a few pixels tall and eaten by the depth camera's e
 holes): the brightness is unknown, NaN. Using all the points then (the top included)
 made the grey bar near the camera brighter than the white box (1.17-1.24 against
 0.91-0.98 in 6 of 300 trials' frames, issue 27); an unknown one ranks after the
-objects whose brightness is measured (:func:`smccli.execute.policy.match_edges`)."""
+objects whose brightness is measured (:func:`smccli.learn.contingency.match_stack`)."""
 SIDE_BAND = (0.25, 0.75)
 """The side faces' points between these fractions of the object's height: above the
 table's contact shadow and below the top's edge, where depth noise and edge holes mix

@@ -27,8 +27,8 @@ def points_from_depth(frame: CameraFrame, max_depth: float = 5.0) -> tuple[np.nd
     x_n = (u - K[0, 2] - K[0, 1] * y_n) / K[0, 0]
     p_cam = np.stack([x_n * z, y_n * z, z], axis=1)
     T = np.asarray(frame.T_world_camera, dtype=np.float64)
-    # einsum rather than ``p_cam @ R.T``: a threaded BLAS call on a busy 2-core machine
-    # took 24 ms instead of 2 (measured); einsum stays single-threaded.
+    # einsum rather than ``p_cam @ R.T``: a threaded BLAS call is ten times slower on a
+    # busy machine; einsum stays single-threaded.
     points = np.einsum("ij,nj->ni", T[:3, :3], p_cam) + T[:3, 3]
     colors = np.asarray(frame.rgb)[v, u]
     return points, colors
@@ -154,6 +154,12 @@ def plane_distance(points: np.ndarray, plane: np.ndarray) -> np.ndarray:
     # einsum, not ``points @ normal``: BLAS threads spin for ~20 ms on a busy 2-core
     # machine for what is a few microseconds of work.
     return np.einsum("ni,i->n", points, plane[:3]) + plane[3]
+
+
+def heights_above(points: np.ndarray, plane: np.ndarray | None) -> np.ndarray:
+    """Height of points (n, 3) above the table plane, shape (n,) [m]; without a plane,
+    above the lowest point."""
+    return plane_distance(points, plane) if plane is not None else points[:, 2] - points[:, 2].min()
 
 
 def above_plane_mask(points: np.ndarray, plane: np.ndarray, margin: float) -> np.ndarray:

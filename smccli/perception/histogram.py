@@ -90,8 +90,10 @@ def d_histogram(h1: np.ndarray, h2: np.ndarray) -> float:
     sp, sq = p.sum(), q.sum()
     if sp <= 0 or sq <= 0:
         return 0.0 if sp == sq else _D_MAX
-    bc = float(np.sum(np.sqrt(p / sp * q / sq)))
-    # BC of identical histograms is 1 up to rounding: call that exactly 0.
-    if bc > 1.0 - 1e-12:
-        return 0.0
-    return float(-np.log(max(bc, BC_MIN)))
+    return float(d_bhattacharyya(np.sum(np.sqrt(p / sp * q / sq))))
+
+
+def d_bhattacharyya(bc: np.ndarray) -> np.ndarray:
+    """-ln BC of Bhattacharyya coefficients ``bc`` (any shape), BC floored at
+    :data:`BC_MIN`; exactly 0 where BC is 1 up to rounding (identical histograms)."""
+    return np.where(bc > 1.0 - 1e-12, 0.0, -np.log(np.maximum(bc, BC_MIN)))

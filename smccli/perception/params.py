@@ -39,8 +39,8 @@ class PerceptionParams:
     max_depth: float = 5.0
     """Depth readings beyond this are "nothing hit" (renderers return the far plane) [m]."""
     voxel_size: float = 0.0
-    """Voxel size for downsampling before the plane fit and clustering; 0 = off [m].
-    Measured: not needed at 320x240 (the pipeline runs in ~10 ms without it)."""
+    """Voxel size for downsampling before the plane fit and clustering; 0 = off [m]: not
+    needed at 320x240."""
     plane_distance: float = 0.006
     """RANSAC inlier distance of the table plane [m]; also the margin above the table
     below which points count as table."""
@@ -92,11 +92,11 @@ class PerceptionParams:
     brightness_scale: float = field(default=0.0, metadata={"omit_default": True})
     """Log-ratio of relative brightnesses |ln(a/b)| that counts as "clearly different"
     (-> 1); 0 = the term is off and not measured (the default). Turn it on (4) for a
-    camera whose exposure varies among achromatic look-alikes under a lamp from above:
-    measured in ``bench_pick_lookalike``, the white box against itself up to 0.36 (its
-    sides' shading turns with it), against the grey bar of its size 0.11-0.8. Under a
-    light from one side a box's sides differ by up to 3 times (the perception tests' lamp):
-    there it would split one object in two (:mod:`smccli.perception.brightness`)."""
+    camera whose exposure varies among achromatic look-alikes under a lamp from above
+    (``bench_pick_lookalike``: a white box against itself up to 0.36, against a grey bar
+    of its size from 0.11). Under a light from one side a box's sides differ by up to 3
+    times (the perception tests' lamp): there it would split one object in two
+    (:mod:`smccli.perception.brightness`)."""
     top_band: float = 0.008
     """Points within this of the top form the top layer, whose centre is the footprint's
     centre [m]."""
@@ -144,12 +144,10 @@ class PerceptionParams:
     join_overlap: float = field(default=0.25, metadata={"omit_default": True})
     """Two clusters standing on the same surface whose footprints (convex hulls in x-y,
     each grown by ``join_margin``) share this much of the smaller one's area are parts of
-    one object (:func:`~smccli.perception.clusters.join_split_parts`): two objects cannot
+    one object (:func:`~smccli.perception.segment.join_split_parts`): two objects cannot
     stand on the same floor space, but a noisy camera's holes along an open box's 1 cm
-    walls cut the box into its floor and its near walls (measured on 40-layout start
-    frames of six scenes: 0.46-1.0 between such parts, 0.21-0.45 between a pyramid and its
-    cut-off apex, which stays apart as before; 0 between two objects, over 1,400 pairs;
-    objects nearer than 1.2 cm are one cluster already, DBSCAN's)."""
+    walls cut the box into its floor and its near walls (such parts share 0.46-1.0, a
+    pyramid and its cut-off apex, which stay apart, at most 0.45; two objects 0)."""
     join_margin: float = field(default=0.0075, metadata={"omit_default": True})
     """How far each footprint grows before the overlap is measured [m]: half of
     ``dbscan_eps``, so parts closer than DBSCAN's reach overlap."""
@@ -159,17 +157,16 @@ class PerceptionParams:
     piece_gap: float = field(default=0.05, metadata={"omit_default": True})
     """Two clusters on the same surface whose footprints come this near [m] may be pieces
     of one object (:func:`~smccli.perception.clusters.cluster_unions`): the floor of an
-    open box split from its near wall by depth holes came 2.5-27 mm near it (measured in
-    the three split frames left after ``join_overlap``, bench_pick_moving)."""
+    open box split from its near wall by depth holes comes 2.5-27 mm near it."""
 
 
 def scene_perception(scene: Scene) -> PerceptionParams:
     """The perception settings a scene's trees start with: the defaults with the scene
     file's ``perception`` section; an arm's crop box, unless the scene sets it, from its
-    reach and its objects (:func:`~smccli.perception.workspace.workspace_box`)."""
+    reach and its objects (:func:`~smccli.perception.reach.workspace_box`)."""
     settings: dict[str, Any] = dict(scene.perception)
     if scene.robot.base is None and scene.robot.arm_joints:
-        from smccli.perception.workspace import workspace_box
+        from smccli.perception.reach import workspace_box
 
         lo, hi = workspace_box(scene)
         settings.setdefault("crop_min", lo)

@@ -9,10 +9,11 @@ import numpy as np
 
 from smccli.perception.clusters import Cluster
 
-DEFAULT_EPSILON = 0.05
-"""Default epsilon of the object clusters [m], horizontal: a grasp centred on an object
+DEFAULT_EPSILON = 0.08
+"""Saliency radius of object clusters (eq. 21) [m], horizontal: a grasp centred on an object
 within a few cm, a placement on top of one, and demo noise (tremor, operator offset) stay
-well inside; the nearest other object in the built-in scenes is >= 10 cm away."""
+well inside; the nearest other object in the built-in scenes is >= 10 cm away. The one
+source of ``SmcParams.epsilon``'s default (:mod:`smccli.learn.params`)."""
 
 
 def salient_cluster(

@@ -1,0 +1,128 @@
+"""Looking again while an arm acts on an object: where the object went, and the
+rest of the path bent onto its new goal.
+
+The executor looks every :data:`LOOK_PERIOD` through a crop box around the object
+(:func:`look_crop`); :func:`find_again` says which cluster of that frame is the object and
+whether its goal should move; :func:`steer` bends the path already streamed onto the DMP
+rolled out to the new goal. Which SMC runs is not reconsidered: decisions stay as the
+paper has them.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from smccli.errors import SmcError
+from smccli.learn.dmp import min_jerk
+from smccli.learn.params import SmcParams
+from smccli.perception import Cluster, PerceptionParams, d_cluster
+from smccli.perception.distance import d_extents
+
+LOOK_PERIOD = 1.0
+"""While an arm acts on an object, it looks at it again this often [s]; 0 = off. Each look
+costs a camera frame and the clusters of the table around the object (about 30 ms at
+320x240); a push is caught if a look comes before the hand is within :data:`LOOK_NEAR`
+of the object."""
+LOOK_MARGIN = 0.05
+"""A look's crop box reaches this far beyond where the object may have gone [m]: table
+around it for the plane fit and the brightness ring."""
+LOOK_NEAR = 0.06
+"""It stops looking once the hand is this close to where it acts [m]: the fingers hide the
+object and the view would pull the goal onto what is left of it."""
+LOOK_RADIUS = 0.08
+"""Looking again, the object acted on is sought this far from where it was last seen [m]:
+a push of a few centimetres, not another object across the table."""
+LOOK_MOVED = 0.01
+"""It has moved when its centre is this far from where it was last seen [m]; less is the
+noise of one view against another (a box's centre wanders 2-5 mm from frame to frame
+under the realistic sensors)."""
+LOOK_MOVED_HIDDEN = 0.03
+"""A partly hidden view (:attr:`Cluster.hidden`) has moved only this far [m]: its centre
+is off by what the arm hides of it, 1-2 cm on a box."""
+LOOK_SAME_SIZE = 0.1
+"""A partly hidden view counts only with its extents within this log-ratio (10 %) of the
+last view's: an arm over a third of a box moves its centre by centimetres."""
+LOOK_BETTER = 0.02
+"""A view that has not moved replaces the last one when its D_P to the taught perception is
+this much lower: seen whole where it was partly hidden, not the noise of two views of one
+pose (D_P 0.002-0.01 apart)."""
+
+
+def check_look_period(look_period: float) -> None:
+    """SmcError (one line, exit 2) unless ``look_period`` is a number >= 0 [s]."""
+    if not (math.isfinite(look_period) and look_period >= 0):
+        raise SmcError(
+            f"--look-period must be a number of seconds >= 0 (0: never look again), "
+            f"got {look_period:g}"
+        )
+
+
+def look_crop(seen: Cluster, params: PerceptionParams) -> PerceptionParams:
+    """The perception settings of a look at ``seen``: the crop box narrowed to the table
+    around it, :data:`LOOK_RADIUS` plus :data:`LOOK_MARGIN` beyond its footprint (its z
+    range unchanged): a quarter of the whole box's time, the table still dominating it for
+    the plane fit."""
+    half = float(np.max(seen.extents[:2])) / 2 + LOOK_RADIUS + LOOK_MARGIN
+    lo, hi = np.asarray(params.crop_min, float), np.asarray(params.crop_max, float)
+    lo[:2] = np.maximum(lo[:2], seen.centroid[:2] - half)
+    hi[:2] = np.minimum(hi[:2], seen.centroid[:2] + half)
+    return replace(params, crop_min=tuple(lo.tolist()), crop_max=tuple(hi.tolist()))
+
+
+def find_again(
+    taught: Cluster, seen: Cluster, clusters: Sequence[Cluster], params: SmcParams
+) -> Cluster | None:
+    """The object last ``seen`` (the SMC's ``taught`` perception) among ``clusters`` of a
+    frame taken while the action runs, when its goal should move; else None.
+
+    A cluster is that object when it lies within :data:`LOOK_RADIUS` of where it was
+    seen and its D_P to the taught perception is below T_hP; a whole view comes before
+    one something hides part of (:attr:`Cluster.hidden`). The goal moves when the object
+    has moved by more than :data:`LOOK_MOVED` (a partly hidden view:
+    :data:`LOOK_MOVED_HIDDEN`, its size within :data:`LOOK_SAME_SIZE`), or when a whole
+    view is clearer: the last one was partly hidden, or this one matches the taught one
+    better by :data:`LOOK_BETTER`.
+    """
+    pp = params.perception
+    hid = pp.hidden_min_points
+    found = [
+        (c.hidden >= hid, d, c)
+        for c in clusters
+        if np.hypot(*(c.centroid[:2] - seen.centroid[:2])) <= LOOK_RADIUS
+        and (d := d_cluster(c, taught, pp)) < params.t_hp
+    ]
+    if not found:
+        return None
+    hidden, d, c = min(found, key=lambda f: (f[0], f[1]))  # a whole view first
+    moved = float(np.hypot(*(c.centroid[:2] - seen.centroid[:2])))
+    if hidden:
+        # Its centre is off by what is hidden: only a larger move counts, and only with
+        # the whole object in view (the arm in front of its edge, not of a third of it).
+        same_size = d_extents(c.extents, seen.extents) <= LOOK_SAME_SIZE
+        if moved <= LOOK_MOVED_HIDDEN or not same_size:
+            return None
+    elif moved <= LOOK_MOVED:
+        clearer = seen.hidden >= hid or d < d_cluster(seen, taught, pp) - LOOK_BETTER
+        if not clearer:
+            return None
+    return c
+
+
+def steer(path: np.ndarray, new: np.ndarray, i: int) -> np.ndarray:
+    """``path`` (n, d) already streamed up to index ``i - 1``, bent onto ``new`` (n, d), the
+    same DMP rolled out to a moved goal: from ``i`` on ``new`` plus the gap at ``i - 1``,
+    faded out with a min-jerk blend so the path stays smooth and ends on the new goal (the
+    moving-target DMP's convergence to a moved goal, docs/dmp.md)."""
+    out = path.copy()
+    n = len(path)
+    if i >= n:
+        return out
+    gap = path[i - 1] - new[i - 1]
+    s = (np.arange(i, n) - (i - 1)) / (n - i)
+    fade = 1.0 - min_jerk(s)
+    out[i:] = new[i:] + fade[:, None] * gap
+    return out

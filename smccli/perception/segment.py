@@ -1,0 +1,303 @@
+"""One RGB-D frame's object points cut into clusters (ML perception, section 3.3).
+
+The segmentation before the description (:mod:`~smccli.perception.clusters`): DBSCAN on
+the points above the support planes, hidden parts attached to what hides them, parts split
+by depth holes joined, and each point's place on its cluster's outline in the image.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import open3d as o3d
+
+from smccli.perception.cloud import (
+    heights_above,
+    object_points_on_planes,
+    support_plane,
+)
+from smccli.perception.params import PerceptionParams
+from smccli.world.sensors import CameraFrame, RobotGeometry
+
+
+def cluster_labels(points: np.ndarray, params: PerceptionParams) -> np.ndarray:
+    """DBSCAN labels (open3d), shape (n,) int; -1 = noise. Deterministic for a given input."""
+    if len(points) == 0:
+        return np.zeros(0, dtype=np.int64)
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    return np.asarray(
+        pcd.cluster_dbscan(eps=params.dbscan_eps, min_points=params.dbscan_min_points),
+        dtype=np.int64,
+    )
+
+
+def _pixels(points: np.ndarray, frame: CameraFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Image column, row (n,) int and depth (n,) [m] of world points (n, 3): the pixels
+    they were lifted from."""
+    T = np.asarray(frame.T_world_camera, dtype=np.float64)
+    K = np.asarray(frame.K, dtype=np.float64)
+    p = np.einsum("ji,nj->ni", T[:3, :3], points - T[:3, 3])  # R^T (p - t), optical frame
+    z = p[:, 2]
+    y_n, x_n = p[:, 1] / z, p[:, 0] / z
+    u = np.rint(K[0, 0] * x_n + K[0, 1] * y_n + K[0, 2]).astype(np.int64)
+    v = np.rint(K[1, 1] * y_n + K[1, 2]).astype(np.int64)
+    return u, v, z
+
+
+def attach_hidden_parts(
+    points: np.ndarray, labels: np.ndarray, frame: CameraFrame, params: PerceptionParams
+) -> np.ndarray:
+    """Labels (n,) with each hidden part merged into the cluster that hides it.
+
+    A mug's handle behind its body is seen past the rim, but the body hides the stretch
+    that joins them (its occlusion shadow), so DBSCAN cuts the handle off as a cluster of
+    its own. Cluster ``a`` joins cluster ``b`` when at least ``attach_min_contacts`` of
+    its pixels touch (8-neighbourhood) pixels of ``b`` that are nearer the camera, with the
+    two points within ``attach_gap`` of each other, ``a``'s top is lower than ``b``'s and
+    ``a`` has at most ``attach_max_ratio`` times ``b``'s points.
+    Touching in the image means nothing visible lies between them (no table); an object
+    standing apart shows table in between.
+    """
+    n_labels = int(labels.max(initial=-1)) + 1
+    if n_labels < 2:
+        return labels
+    h, w = np.asarray(frame.depth).shape[:2]
+    u, v, z = _pixels(points, frame)
+    inside = (labels >= 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    index = np.full((h, w), -1, dtype=np.int64)
+    index[v[inside], u[inside]] = np.flatnonzero(inside)
+    idx = np.flatnonzero(inside)
+    pairs = []
+    for du, dv in ((1, 0), (0, 1), (1, 1), (1, -1)):  # each unordered neighbour pair once
+        uu, vv = u[idx] + du, v[idx] + dv
+        ok = (uu >= 0) & (uu < w) & (vv >= 0) & (vv < h)
+        i = idx[ok]
+        j = index[vv[ok], uu[ok]]
+        keep = j >= 0
+        i, j = i[keep], j[keep]
+        keep = labels[i] != labels[j]
+        pairs.append(np.stack([i[keep], j[keep]], axis=1))
+    ij = np.concatenate(pairs)
+    if len(ij) == 0:
+        return labels
+    # Order each pair as (farther, nearer) and keep those bridging a small gap.
+    far_first = z[ij[:, 0]] >= z[ij[:, 1]]
+    ij = np.where(far_first[:, None], ij, ij[:, ::-1])
+    gap = np.linalg.norm(points[ij[:, 0]] - points[ij[:, 1]], axis=1)
+    ij = ij[gap < params.attach_gap]
+    tops = np.full(n_labels, -np.inf)
+    np.maximum.at(tops, labels[labels >= 0], points[labels >= 0, 2])
+    sizes = np.bincount(labels[labels >= 0], minlength=n_labels)
+    contacts = np.zeros((n_labels, n_labels), dtype=np.int64)
+    np.add.at(contacts, (labels[ij[:, 0]], labels[ij[:, 1]]), 1)
+    parent = np.arange(n_labels)
+    for a in range(n_labels):
+        b = int(np.argmax(contacts[a]))
+        if (
+            contacts[a, b] >= params.attach_min_contacts
+            and tops[a] < tops[b]
+            and sizes[a] <= params.attach_max_ratio * sizes[b]
+        ):
+            parent[a] = b
+    # Follow chains (a part of a part); tops strictly increase along them, so they end.
+    for _ in range(n_labels):
+        parent = parent[parent]
+    out = labels.copy()
+    out[labels >= 0] = parent[labels[labels >= 0]]
+    return out
+
+
+def _footprint_mask(
+    xy: np.ndarray, origin: np.ndarray, shape: tuple[int, int], grow: int
+) -> np.ndarray:
+    """The convex hull of points ``xy`` (n, 2) [m] rasterised at :data:`JOIN_CELL` on a
+    grid of ``shape`` whose cell (0, 0) is at ``origin``, dilated by ``grow`` cells."""
+    mask = np.zeros(shape, dtype=np.uint8)
+    cells = np.rint((xy - origin) / JOIN_CELL).astype(np.int32)
+    cv2.fillConvexPoly(mask, cv2.convexHull(cells), 1)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))
+    return cv2.dilate(mask, kernel).astype(bool)
+
+
+JOIN_CELL = 0.002
+"""Grid cell of the footprint overlap in :func:`join_split_parts` [m]: a fifth of the
+thinnest wall of the built-in objects."""
+
+
+def support_of(
+    points: np.ndarray, planes: list[np.ndarray], params: PerceptionParams
+) -> np.ndarray | None:
+    """The plane ``points`` (n, 3) stand on: on a tabletop its one table; among shelves
+    and cabinet tops (``remove_walls``), the one just below them."""
+    if params.remove_walls:
+        return support_plane(points, planes)
+    return planes[0] if planes else None
+
+
+def standing_clusters(
+    points: np.ndarray,
+    labels: np.ndarray,
+    planes: list[np.ndarray],
+    params: PerceptionParams,
+    min_points: int,
+) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """(label, point indices, support plane) of each cluster of at least ``min_points``
+    that reaches down to within ``join_base`` of the plane it stands on: what stands on a
+    surface, not what is held above it."""
+    out = []
+    for k in range(int(labels.max(initial=-1)) + 1):
+        idx = np.flatnonzero(labels == k)
+        if len(idx) < min_points:
+            continue
+        plane = support_of(points[idx], planes, params)
+        if plane is not None and float(heights_above(points[idx], plane).min()) <= params.join_base:
+            out.append((k, idx, plane))
+    return out
+
+
+def join_split_parts(
+    points: np.ndarray,
+    labels: np.ndarray,
+    planes: list[np.ndarray],
+    params: PerceptionParams,
+) -> np.ndarray:
+    """Labels (n,) with the parts of one object that depth holes split apart merged.
+
+    A noisy depth camera loses the pixels along depth edges; an open box's 1 cm walls are
+    nothing but edges, so its floor (seen past the near rim) and its near walls fall apart
+    into clusters DBSCAN cannot join. Two objects standing on one surface never share floor
+    space, so clusters standing on the same support plane (each reaching down to within
+    ``join_base`` of it) whose footprints, grown by ``join_margin``, overlap by
+    ``join_overlap`` of the smaller one's are one object. An object held above another
+    does not reach down to the surface and stays apart.
+    """
+    n_labels = int(labels.max(initial=-1)) + 1
+    if n_labels < 2:
+        return labels
+    standing = [
+        (k, points[idx, :2].astype(np.float64), plane)
+        for k, idx, plane in standing_clusters(points, labels, planes, params, min_points=3)
+    ]
+    parent = np.arange(n_labels)
+
+    def root(a: int) -> int:
+        while parent[a] != a:
+            a = int(parent[a])
+        return a
+
+    grow = max(int(round(params.join_margin / JOIN_CELL)), 0)
+    for i, (a, xa, pa) in enumerate(standing):
+        for b, xb, pb in standing[i + 1 :]:
+            if pa is not pb or root(a) == root(b):
+                continue
+            reach = 2 * params.join_margin
+            if np.any(
+                np.maximum(xa.min(axis=0), xb.min(axis=0)) - reach
+                > np.minimum(xa.max(axis=0), xb.max(axis=0))
+            ):
+                continue  # bounding boxes too far apart to overlap
+            lo = np.minimum(xa.min(axis=0), xb.min(axis=0)) - reach
+            cols, rows = (
+                np.ceil((np.maximum(xa.max(axis=0), xb.max(axis=0)) + reach - lo) / JOIN_CELL) + 1
+            ).astype(int)
+            shape = (int(rows), int(cols))
+            ma = _footprint_mask(xa, lo, shape, grow)
+            mb = _footprint_mask(xb, lo, shape, grow)
+            shared = np.count_nonzero(ma & mb)
+            if shared >= params.join_overlap * min(ma.sum(), mb.sum()):
+                parent[root(b)] = root(a)
+    roots = np.array([root(k) for k in range(n_labels)])
+    out = labels.copy()
+    out[labels >= 0] = roots[labels[labels >= 0]]
+    return out
+
+
+def cut_points(
+    points: np.ndarray, labels: np.ndarray, frame: CameraFrame, params: PerceptionParams
+) -> np.ndarray:
+    """Points (n,) whose pixel borders (8-neighbourhood) a pixel outside their cluster that
+    is not ``silhouette_step`` farther from the camera, or the image's edge.
+
+    An object's outline in the image borders only what lies behind it (the table) or the
+    object itself; anything else nearer or level with it (an occluder, pixels removed by
+    the self-filter or the crop) hides part of it.
+    """
+    return outline_points(points, labels, frame, params)[0]
+
+
+def outline_points(
+    points: np.ndarray, labels: np.ndarray, frame: CameraFrame, params: PerceptionParams
+) -> tuple[np.ndarray, np.ndarray]:
+    """Two masks (n,) of the points on their cluster's outline in the image, in one pass
+    over the 8-neighbourhood of each point's pixel:
+
+    - *cut* (:func:`cut_points`): a neighbour outside the cluster that is not
+      ``silhouette_step`` farther from the camera, or the image's edge;
+    - *occluded*: a neighbour of another label whose depth reading is ``silhouette_step``
+      nearer, or the image's edge: something in front (the arm, another object) or the
+      frame hides part of the object (:attr:`~smccli.perception.clusters.Cluster.hidden`).
+      A neighbour level with it (an object touching it) or without a reading (a hole of a
+      noisy depth camera) is not in front of it.
+    """
+    depth = np.asarray(frame.depth, dtype=np.float64)
+    h, w = depth.shape[:2]
+    u, v, z = _pixels(points, frame)
+    img = np.full((h, w), -2, dtype=np.int64)  # -2: no object point (table, robot, crop)
+    ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    img[v[ok], u[ok]] = labels[ok]
+    cut = ~ok
+    occluded = ~ok
+    for du in (-1, 0, 1):
+        for dv in (-1, 0, 1):
+            if du == 0 and dv == 0:
+                continue
+            uu, vv = u + du, v + dv
+            inside = ok & (uu >= 0) & (uu < w) & (vv >= 0) & (vv < h)
+            cut |= ok & ~inside  # at the image's edge
+            occluded |= ok & ~inside
+            i = np.flatnonzero(inside)
+            d = depth[vv[i], uu[i]]
+            other = img[vv[i], uu[i]] != labels[i]
+            behind = np.isfinite(d) & (d > z[i] + params.silhouette_step)
+            cut[i] |= other & ~behind
+            nearer = np.isfinite(d) & (d > 0) & (d < z[i] - params.silhouette_step)
+            occluded[i] |= other & nearer
+    return cut, occluded
+
+
+@dataclass(frozen=True, slots=True)
+class Segmentation:
+    """One frame's object points and their clusters: what the clusters are described from."""
+
+    points: np.ndarray
+    """Object points standing on the table, shape (n, 3) [m], world frame."""
+    colors: np.ndarray
+    """Their colours, shape (n, 3) uint8 RGB."""
+    planes: list[np.ndarray]
+    """Support planes ``[a, b, c, d]`` found (the table first)."""
+    table: tuple[np.ndarray, np.ndarray]
+    """The table's points (m, 3) [m] and colours (m, 3) uint8 (relative brightness)."""
+    labels: np.ndarray
+    """Cluster of each point, shape (n,) int; -1 = noise."""
+    cut: np.ndarray
+    """Points (n,) bordering something that hides part of their object (:func:`cut_points`)."""
+    occluded: np.ndarray
+    """Points (n,) bordering something in front of them (:func:`outline_points`)."""
+
+
+def segment_frame(
+    frame: CameraFrame,
+    robot: RobotGeometry | None,
+    params: PerceptionParams,
+    base: np.ndarray | None = None,
+) -> Segmentation:
+    """depth -> world points -> crop -> self-filter (``robot``'s spheres) -> table plane
+    removal (RANSAC) -> DBSCAN -> hidden parts joined to the cluster hiding them -> parts
+    split by depth holes joined (:func:`join_split_parts`) -> outlines."""
+    points, colors, planes, table = object_points_on_planes(frame, robot, params, base)
+    labels = attach_hidden_parts(points, cluster_labels(points, params), frame, params)
+    labels = join_split_parts(points, labels, planes, params)
+    cut, occluded = outline_points(points, labels, frame, params)
+    return Segmentation(points, colors, planes, table, labels, cut, occluded)
