@@ -48,7 +48,7 @@ from smccli.learn.dmp import rollout
 from smccli.learn.tree import ROOT, Edge, Tree
 from smccli.perception import Cluster, clusters_from_frame, scale_reading
 from smccli.perception.scan import align_scans
-from smccli.world.controller import reachable
+from smccli.world.controller import ARRIVAL_TOLERANCE, reachable
 from smccli.world.geometry import between, compose, se2, se2_pose
 from smccli.world.sensors import CameraFrame, PoiCommand
 
@@ -88,9 +88,6 @@ CONTROL_OUTCOMES = ("success", "no_contingent_smc", "target_unreachable", "timeo
 """How :meth:`TreeExecutor.run` ends: a leaf reached ("success", to be confirmed by the
 evaluation), or one of the three control stops."""
 
-ARRIVAL_TOLERANCE = 0.005
-"""The hold after a rollout ends once the POI is this close to the goal [m] (as the
-scripted operator's moves)."""
 MAX_HOLD = 1.5
 """Longest hold of the goal after a rollout [s]."""
 RETREAT = 0.08

@@ -44,6 +44,7 @@ from smccli.perception import Cluster
 from smccli.world.controller import CartesianController, reach_problem
 from smccli.world.geometry import between
 from smccli.world.robot import Robot
+from smccli.world.sensors import CONTROL_PERIOD
 
 __all__ = [
     "CONTROL_PERIOD",
@@ -58,9 +59,6 @@ __all__ = [
     "equivalent",
     "match_edges",
 ]
-
-CONTROL_PERIOD = 0.01
-"""Default control period of a plan's trajectory [s] (the simulator's)."""
 
 
 class TreePolicy:

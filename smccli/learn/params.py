@@ -22,6 +22,7 @@ from smccli.errors import SmcError
 from smccli.learn.dmp import DmpParams
 from smccli.learn.trim import IdleParams
 from smccli.perception import PerceptionParams
+from smccli.perception.saliency import DEFAULT_EPSILON
 from smccli.perception.scan import ScanParams
 
 
@@ -33,7 +34,7 @@ class SmcParams:
     """Action contingency threshold T_hA (eq. 31) [m]: D_A below it means the same action."""
     t_hp: float = 0.1
     """Perception contingency threshold T_hP (eq. 31, 36): D_P below it means the same context."""
-    epsilon: float = 0.08
+    epsilon: float = DEFAULT_EPSILON
     """Saliency radius of object clusters (eq. 21) [m]: horizontal distance to the POI."""
     scan_epsilon: float = 8.0
     """Saliency radius of a lidar scan (eq. 18) [m]: the scan is salient when the fragment's

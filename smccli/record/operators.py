@@ -22,7 +22,7 @@ import numpy as np
 
 from smccli.errors import ScriptError, SmcError
 from smccli.schemas import SchemaProblem, YamlDocument, check_yaml, key_path, parse_yaml
-from smccli.world.controller import home_poi, reach_problem
+from smccli.world.controller import ARRIVAL_TOLERANCE, home_poi, reach_problem
 from smccli.world.geometry import between, compose, near, wrap
 from smccli.world.layout import nominal_layout, sample_layout
 from smccli.world.scene import ROBOT_KEY, Layout, Scene, load_scene
@@ -34,8 +34,6 @@ TREMOR_TIME_CONSTANT = 0.15
 """Correlation time of the tremor noise [s]."""
 MIN_MOVE_TIME = 0.5
 """Shortest move [s]."""
-ARRIVAL_TOLERANCE = 0.005
-"""A move ends once the POI is this close to its target [m] (or 1 s after the path ends)."""
 
 
 @dataclass(frozen=True, slots=True)

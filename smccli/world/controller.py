@@ -31,6 +31,10 @@ from smccli.world.geometry import wrap, yaw_of
 from smccli.world.robot import Robot
 
 # Flip so that the POI z axis points down; the yaw then rotates about world z.
+ARRIVAL_TOLERANCE = 0.005
+"""A move has arrived once the POI is this close to its target [m]: the scripted operator's
+moves and the executor's hold after a rollout end there."""
+
 _DOWN = np.diag([1.0, -1.0, -1.0])
 _RCOND = 1e-4
 """Singular values of ``J`` below this fraction of the largest are zero in ``J⁺``."""
