@@ -12,7 +12,8 @@ from typing import Any
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import Attachment, Chunk, Footer, Statistics
-from mcap.stream_reader import CRCValidationError, get_chunk_data_stream
+
+from smccli.logs.records import ChunkCrcError, decompressed
 
 MAGIC = b"\x89MCAP0\r\n"
 """The magic bytes an MCAP file opens (and closes) with."""
@@ -56,8 +57,8 @@ def _chunk_problem(body: bytes) -> tuple[str | None, bool]:
     """(problem or None, whether a CRC was checked) for one chunk record's body."""
     try:
         chunk = _record(Chunk, body)
-        get_chunk_data_stream(chunk, validate_crc=True)
-    except CRCValidationError as e:
+        decompressed(chunk)  # the reader's own decompression and CRC check
+    except ChunkCrcError as e:
         return f"CRC mismatch (stored {e.expected:#010x}, computed {e.actual:#010x})", True
     except Exception as e:  # any codec or framing failure means the chunk is unreadable
         return f"unreadable ({type(e).__name__}: {e})", False
