@@ -57,18 +57,19 @@ KEY_Q, KEY_E = ord("Q"), ord("E")
 def display():
     if not (shutil.which("Xvfb") and shutil.which("xdotool")):
         pytest.fail("Xvfb and xdotool are needed (make setup installs them)")
-    for n in range(90, 140):
-        if not os.path.exists(f"/tmp/.X11-unix/X{n}") and not os.path.exists(f"/tmp/.X{n}-lock"):
-            break
+    # Xvfb picks a free display itself and writes its number to the pipe once it listens:
+    # no race with another test process choosing the same number.
+    read_fd, write_fd = os.pipe()
     xvfb = subprocess.Popen(
-        ["Xvfb", f":{n}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
+        ["Xvfb", "-displayfd", str(write_fd), "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
+        pass_fds=(write_fd,),
     )
-    deadline = time.monotonic() + 10
-    while not os.path.exists(f"/tmp/.X11-unix/X{n}"):
-        assert time.monotonic() < deadline, "Xvfb did not start"
-        time.sleep(0.1)
+    os.close(write_fd)
+    with os.fdopen(read_fd) as pipe:
+        n = pipe.readline().strip()
+    assert n.isdigit(), f"Xvfb did not start (exit code {xvfb.poll()})"
     yield f":{n}"
     xvfb.terminate()
     xvfb.wait(timeout=10)
