@@ -494,7 +494,7 @@ def test_bad_tree_or_log_is_one_line_and_exit_code_2(inputs, tmp_path):
 
 
 def test_a_readable_log_without_a_topic_is_shown_with_a_warning(inputs, tmp_path):
-    """A viewer shows what a log holds (README, errors): a log without its camera, or
+    """A viewer shows what a log holds (docs/logs.md, errors): a log without its camera, or
     without its scene attachment, is written with one warning line naming what is
     missing, exit 0; the recording holds what the log does hold."""
     from smccli.logs import strip_topic

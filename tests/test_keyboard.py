@@ -291,7 +291,7 @@ def test_a_session_drags_the_marker_steps_keys_and_records_two_episodes(tmp_path
     """``smc record --operator keyboard --episodes 2``. Episode 1: the magenta target
     marker is dragged with the mouse, then Up, G, M and Enter (keep, next). Episode 2: X
     (discard: recorded again), then the keys alone, Enter. Two logs; the HUD's screenshot
-    is kept (``SMC_HUD_PNG``: where to copy it, for the README)."""
+    is kept (``SMC_HUD_PNG``: where to copy it, for docs/recording.md)."""
     with _recording(tmp_path, display, extra=("--episodes", "2")) as (out, env, win, err):
         err.wait_sim(1.0)
         _drag_marker(env, display, dx=-90, dy=60)

@@ -24,7 +24,7 @@ pytestmark = pytest.mark.slow
 
 
 N_BENCH = 4
-"""bench_pick demonstrations, each from its own random layout (the README's compile figure
+"""bench_pick demonstrations, each from its own random layout (docs/figures.md's compile figure
 has 100; 4 keep `make test` within its budget and still span the white box's ranges)."""
 N_PAIRS = 6
 """weigh_sort light/heavy pairs, each demonstration from its own random layout."""

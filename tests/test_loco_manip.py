@@ -172,7 +172,7 @@ def test_replay_on_a_random_layout(tree, tmp_path):
 
 @pytest.mark.slow
 def test_small_campaign(tree):
-    """6 random layouts (campaign seed 0): measured 5 of 6 (README: the 100-trial rate).
+    """6 random layouts (campaign seed 0): measured 5 of 6 (docs/figures.md: the 100-trial rate).
     A failure is a stop at a decision whose perception did not match (the object or the
     bar seen partly hidden); the robot never ends in a collision or with the object
     dropped."""
@@ -186,7 +186,7 @@ def test_small_campaign(tree):
 def test_a_campaign_repeats_bit_for_bit(tree):
     """The same seed twice, each on 2 fresh worker processes: every trial's outcome, path,
     D_P of every candidate, mapped goals and final object poses are the same bits (the
-    README's 100-trial campaign flipped two trials between runs while open3d's ICP ran on
+    100-trial campaign of docs/figures.md flipped two trials between runs while open3d's ICP ran on
     2 threads)."""
     t, sc = resolve(tree, None)
     runs = [[r.repeatable() for r in run_trials(t, sc, trials=3, seed=0, workers=2)] for _ in "ab"]
