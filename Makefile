@@ -65,7 +65,7 @@ demo: setup
 sample-logs: setup
 	$(PY) -m smccli.bench.sample_logs
 
-# The README's screenshots of `smc inspect --serve` in Chromium (docs/img/viewer_*.png).
+# The viewer screenshots of the README and docs/inspect.md of `smc inspect --serve` in Chromium (docs/img/viewer_*.png).
 viewer-shots: setup
 	$(PY) -m smccli.bench.viewer
 

@@ -234,7 +234,7 @@ def test_other_room_is_another_place(rng, room_a, room_b):
 def test_congruent_rooms_are_not_told_apart():
     """Known limitation, pinned so that it stays documented: a scan sees geometry only.
     Two rooms mirrored across their shared wall, each with a layout that is itself
-    mirror-symmetric, are congruent and score as the same place (DESIGN.md section 9);
+    mirror-symmetric, are congruent and score as the same place (docs/design.md section 9);
     the room histogram or different furniture must separate them."""
     rng = np.random.default_rng(1)
     left = np.concatenate([polygon([(0, 0), (5, 0), (5, 4), (0, 4)]), box(2.5, 3.6, 1.5, 0.6)])

@@ -1,6 +1,7 @@
 """``smc inspect --serve`` in a real browser: Debian's Chromium driven by Playwright.
 
-Used by the browser test (tests/test_inspect.py) and for the README's viewer screenshots:
+Used by the browser test (tests/test_inspect.py) and for the viewer screenshots (README,
+docs/inspect.md):
 ``python -m smccli.bench.viewer`` (``make viewer-shots``) compiles the sample trees, serves
 each with its logs, waits until the page has drawn them and writes
 ``docs/img/viewer_<scene>.png``.
@@ -202,7 +203,7 @@ def image_distance(shown: np.ndarray, frame: np.ndarray) -> float:
     return float(np.abs(shown.astype(float) - scaled.astype(float)).mean())
 
 
-# --- README screenshots -------------------------------------------------------------------
+# --- screenshots (README, docs/inspect.md) --------------------------------------------------------
 
 
 def page_drawn(tree: Any, frame: np.ndarray | None = None) -> Callable[[np.ndarray], bool]:
