@@ -39,8 +39,12 @@ system-deps:
 	  fi; \
 	fi
 
+# One test process per core; a file's tests stay together (module fixtures built once).
+TEST_WORKERS ?= $(shell nproc)
+PYTEST := $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
+
 test: setup
-	$(PY) -m pytest -q --durations=15
+	$(PYTEST) --durations=15
 
 # The suite beside CPU burners, twice as many as cores by default (BURNERS=N to change):
 # no test may depend on the machine's speed. The burners are bounded (timeout) and stopped
@@ -54,10 +58,10 @@ test-under-load: setup
 	done; \
 	trap 'kill $$pids 2>/dev/null || true' EXIT; \
 	echo "$(BURNERS) CPU burners running on $$(nproc) cores (pids$$pids, at most $(BURN_S) s)"; \
-	$(PY) -m pytest -q --durations=15
+	$(PYTEST) --durations=15
 
 test-fast: setup
-	$(PY) -m pytest -q -m "not slow"
+	$(PYTEST) -m "not slow"
 
 demo: setup
 	$(PY) -m smccli.bench.demo

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import os
 import subprocess
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -58,39 +61,61 @@ def sample_logs() -> dict[str, list[Path]]:
     return {s: sample_log_paths(s) for s in SCENES}
 
 
+@contextmanager
+def built_once(tmp_path_factory, name: str) -> Iterator[tuple[Path, bool]]:
+    """``(folder, build)``: a folder shared by every test process of the run (pytest-xdist's
+    workers share the run's temporary root) and whether this caller must build its files.
+    The first process to take the lock builds, the others wait for it and reuse the files;
+    a build that raises leaves the folder to be built again by the next."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent
+    folder = root / f"shared-{name}"
+    folder.mkdir(exist_ok=True)
+    with open(root / f"shared-{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        done = folder / ".built"
+        yield folder, not done.exists()
+        done.touch()
+
+
 @pytest.fixture(scope="session")
 def sample_trees(tmp_path_factory, sample_logs) -> dict[str, Path]:
-    """Each scene's sample demos compiled into a tree."""
+    """Each scene's sample demos compiled into a tree (once per run)."""
     from smccli.learn.compile import compile_logs
 
-    root = tmp_path_factory.mktemp("trees")
-    out = {}
-    for scene, logs in sample_logs.items():
-        path = root / f"{scene}.json"
-        compile_logs(logs, path)
-        out[scene] = path
+    with built_once(tmp_path_factory, "trees") as (root, build):
+        out = {scene: root / f"{scene}.json" for scene in sample_logs}
+        if build:
+            for scene, logs in sample_logs.items():
+                compile_logs(logs, out[scene])
     return out
 
 
 @pytest.fixture(scope="session")
 def reseeded_logs(tmp_path_factory) -> dict[int, dict[str, list[Path]]]:
     """The sample scripts recorded again with seed 1 (tremor, hesitation, speed),
-    each from its own random layout, as users record them (``--randomize``)."""
+    each from its own random layout, as users record them (``--randomize``; once per run)."""
     from smccli.record.session import RecordConfig, record
 
-    root = tmp_path_factory.mktemp("reseeded")
     out: dict[int, dict[str, list[Path]]] = {}
-    for seed in (1,):
-        out[seed] = {}
-        for scene in SCENES:
-            paths = []
-            for k, script in enumerate(sorted((SAMPLE_LOGS / scene).glob("*.yaml"))):
-                path = root / f"{scene}_{script.stem}_s{seed}.mcap"
-                # Another seed per script: the scene's demonstrations start apart too.
-                cfg = RecordConfig(
-                    scene=scene, script=script, seed=10 * seed + k, output=path, randomize=True
-                )
-                record(cfg)
-                paths.append(path)
-            out[seed][scene] = paths
+    with built_once(tmp_path_factory, "reseeded") as (root, build):
+        for seed in (1,):
+            out[seed] = {}
+            for scene in SCENES:
+                paths = []
+                for k, script in enumerate(sorted((SAMPLE_LOGS / scene).glob("*.yaml"))):
+                    path = root / f"{scene}_{script.stem}_s{seed}.mcap"
+                    if build:
+                        # Another seed per script: the scene's demonstrations start apart too.
+                        cfg = RecordConfig(
+                            scene=scene,
+                            script=script,
+                            seed=10 * seed + k,
+                            output=path,
+                            randomize=True,
+                        )
+                        record(cfg)
+                    paths.append(path)
+                out[seed][scene] = paths
     return out
