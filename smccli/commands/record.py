@@ -14,6 +14,7 @@ from rich.table import Table
 from smccli.commands.console import err, live, one_line, out, say, warn
 
 if TYPE_CHECKING:
+    from smccli.record.session import RecordSummary
     from smccli.world.scene import Scene
 
 
@@ -94,6 +95,12 @@ def record(
                 next_line[0] += 1.0
 
         summaries = record_episodes(cfg, on_status=status, on_message=say)
+    _report(summaries, scene, allow_failed)
+
+
+def _report(summaries: list[RecordSummary], scene: str, allow_failed: bool) -> None:
+    """Print what each log holds; exit 130 when the session was interrupted, 1 when a
+    demonstration failed its task (without ``allow_failed``)."""
     from smccli.world.scene import load_scene
 
     recorded_in = load_scene(scene)
@@ -113,7 +120,7 @@ def record(
         raise typer.Exit(1)
 
 
-def _print_summary(summary, scene: Scene, allow_failed: bool) -> None:
+def _print_summary(summary: RecordSummary, scene: Scene, allow_failed: bool) -> None:
     out.print(
         f"[bold green]wrote[/] {escape(str(summary.path))}  ({summary.size_bytes / 1e6:.2f} MB, "
         f"{summary.duration:.1f} s, {summary.fragments} fragment(s) marked)"
