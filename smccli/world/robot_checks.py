@@ -9,9 +9,10 @@ scene given, else a table holding the robot alone) and measures:
   other closed than open (a tendon gripper commanded outside its actuator's units does not
   move; swapped commands open it when told to close);
 - ``home_contacts``: at home with the gripper open, no geom the arm moves touches anything;
-- ``home_view``: at home, the arm's bounding spheres (:func:`~smccli.world.robot_model.
-  geometry`) projected through the scene's camera cover none of the image where the
-  scene's object ranges lie (the first decision perceives the table with the arm at home);
+- ``home_view``: at home, the arm's bounding spheres (:func:`~smccli.world.robot_view.
+  link_spheres`) projected through the scene's camera cover at most VIEW_SHARE of the
+  image where each object's range lies (the first decision perceives the table with the
+  arm at home);
 - ``reach``: the POI reaches each object's range on a grid, pointing down at the object's
   yaw (or the half turn the gripper's symmetry allows), by the controller's IK;
 - ``poi``: at the open posture the POI lies between the two pads along its y axis (the
@@ -34,8 +35,7 @@ import numpy as np
 from smccli.errors import SceneError
 from smccli.world.controller import CartesianController, reach_problem
 from smccli.world.robot import Robot, arm_reach
-from smccli.world.robot_model import geometry
-from smccli.world.robot_view import PinholeView, range_corners
+from smccli.world.robot_view import PinholeView, link_spheres, range_corners
 from smccli.world.specs import ObjectSpec, Scene
 
 Status = Literal["pass", "fail", "skip"]
@@ -91,8 +91,8 @@ class Postures:
     finger_closed: np.ndarray
     finger_open: np.ndarray
     hand_open: tuple[tuple[str, float], ...]
-    """Each hinge or slide joint the fingers' bodies hold (linkages too) and its value
-    after the open command: what another model of the robot takes by name."""
+    """Each hinge or slide joint past the wrist roll (fingers, coupled ones and linkages)
+    and its value after the open command: what another model of the robot takes by name."""
 
 
 @dataclass
@@ -204,6 +204,9 @@ def _settle(bench: _Bench, command: float) -> None:
             still = 0
 
 
+_HINGE_SLIDE = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+
+
 def settle_gripper(bench: _Bench) -> Postures | None:
     """The robot at home, its gripper driven closed then open (from open), settled each
     time; None without a gripper."""
@@ -219,11 +222,13 @@ def settle_gripper(bench: _Bench) -> Postures | None:
     _settle(bench, g.target(1.0))
     opened = bench.data.qpos.copy()
     m = bench.model
-    hand = tuple(
+    wrist = _subtree(m, [int(m.jnt_bodyid[m.joint(bench.robot.arm_joints[-1]).id])])
+    hand = tuple(  # every joint past the wrist: a coupled finger, a linkage's
         (m.joint(j).name, float(opened[m.jnt_qposadr[j]]))
         for j in range(m.njnt)
-        if int(m.jnt_bodyid[j]) in bench.fingers
-        and m.jnt_type[j] in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE)
+        if int(m.jnt_bodyid[j]) in wrist
+        and m.joint(j).name not in bench.robot.arm_joints
+        and int(m.jnt_type[j]) in _HINGE_SLIDE
     )
     return Postures(closed, opened, closed[bench.finger_q], opened[bench.finger_q], hand)
 
@@ -399,13 +404,12 @@ def check_home_view(bench: _Bench, postures: Postures | None) -> Finding:
     camera = PinholeView(m, d, scene)
     joints = bench.robot.arm_joints
     second = int(m.jnt_bodyid[m.joint(joints[1] if len(joints) > 1 else joints[0]).id])
-    links = np.array(sorted(_subtree(m, [second])))
-    spheres = geometry(m, d, links, margin=0.0)
+    centers, radii = link_spheres(m, d, _subtree(m, [second]))
     shares = []
     for obj in scene.objects:
         region, far = camera.region(range_corners(obj))
         if region.any():
-            covered = camera.cover(spheres.centers, spheres.radii, far)
+            covered = camera.cover(centers, radii, far)
             shares.append((float((covered & region).sum() / region.sum()), obj.name))
     if not shares:
         return Finding("home_view", "skip", f"no object in camera {scene.camera.name}'s view")

@@ -78,3 +78,37 @@ def convex_mask(uv: np.ndarray, w: int, h: int) -> np.ndarray:
     pts = np.stack([uu.ravel(), vv.ravel()], axis=1).astype(float)
     inside = (pts @ eq[:, :2].T + eq[:, 2] <= 0).all(axis=1)
     return inside.reshape(h, w)
+
+
+def link_spheres(
+    m: mujoco.MjModel, d: mujoco.MjData, bodies: set[int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Spheres covering every geom of ``bodies`` at ``data``'s kinematics, collision and
+    visual alike (the camera sees both): centres (k, 3) [m] and radii (k,) [m].
+
+    Spheres along a capsule's or a cylinder's axis, as
+    :func:`~smccli.world.robot_model.geometry` places them; any other geom's bounding box
+    (``geom_aabb``, in its own frame: a box's own) is covered along its longest side. That
+    function's one sphere around a mesh (``geom_rbound``) is looser: measured on
+    robosuite's UR5e at its home in bench_pick, its links cover 33 % of the white box's
+    range with those, 25 % with these, and hide 9.5 % rendered (segmentation)."""
+    centers: list[np.ndarray] = []
+    radii: list[float] = []
+    round_ = (int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_CYLINDER))
+    for g in range(m.ngeom):
+        if int(m.geom_bodyid[g]) not in bodies:
+            continue
+        rot = d.geom_xmat[g].reshape(3, 3)
+        if int(m.geom_type[g]) in round_:
+            centre, k = d.geom_xpos[g], 2
+            radius, length = float(m.geom_size[g, 0]), float(m.geom_size[g, 1])
+        else:
+            centre = d.geom_xpos[g] + rot @ m.geom_aabb[g, :3]
+            half = m.geom_aabb[g, 3:]
+            k = int(np.argmax(half))
+            radius, length = float(np.linalg.norm(np.delete(half, k))), float(half[k])
+        n = max(1, int(np.ceil(2 * length / max(radius, 1e-3))) + 1)
+        for s in np.linspace(-length, length, n) if n > 1 else [0.0]:
+            centers.append(centre + s * rot[:, k])
+            radii.append(radius)
+    return np.array(centers).reshape(-1, 3), np.array(radii)
