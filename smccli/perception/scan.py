@@ -16,6 +16,7 @@ matrices, ``T_a_b`` mapping points of frame b into frame a (:mod:`smccli.world.g
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +27,11 @@ from smccli.world.geometry import se2, se2_pose, se2_se3
 
 _REG = o3d.pipelines.registration
 _MIN_POINTS = 10
+_TARGETS: OrderedDict[tuple[bytes, int], o3d.geometry.PointCloud] = OrderedDict()
+"""The last target clouds with their normals, by points and neighbour count: a decision
+aligns the scan it sees to each stored scan of the tree, the same ones every time, and
+their normals cost as much as a third of the ICP."""
+_TARGETS_KEPT = 64
 """Fewer valid beams than this make no outline to align [points]."""
 
 
@@ -192,6 +198,20 @@ def _cloud(xy: np.ndarray, normals: np.ndarray | None = None) -> o3d.geometry.Po
     return cloud
 
 
+def _target_cloud(xy: np.ndarray, k: int) -> o3d.geometry.PointCloud:
+    """:func:`_cloud` of target points (n, 2) with their normals, from :data:`_TARGETS` when
+    the same points came before (ICP reads the target, never changes it)."""
+    key = (xy.tobytes(), k)
+    cloud = _TARGETS.get(key)
+    if cloud is None:
+        cloud = _TARGETS[key] = _cloud(xy, _normals_2d(xy, k))
+        if len(_TARGETS) > _TARGETS_KEPT:
+            _TARGETS.popitem(last=False)
+    else:
+        _TARGETS.move_to_end(key)
+    return cloud
+
+
 def _checked_points(scan: Scan2D, role: str) -> np.ndarray:
     xy = scan.points()
     if len(xy) < _MIN_POINTS:
@@ -223,7 +243,7 @@ def align_scans(
     params = params or ScanParams()
     xy_t = _checked_points(target, "target")
     xy_s = _checked_points(source, "source")
-    tgt = _cloud(xy_t, _normals_2d(xy_t, params.normal_neighbours))
+    tgt = _target_cloud(xy_t, params.normal_neighbours)
     src = _cloud(xy_s)
     est = (
         _REG.TransformationEstimationPointToPlane()
