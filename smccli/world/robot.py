@@ -250,6 +250,10 @@ def _composition(d: dict[str, Any], path: Path | None, arm_file: Path | None) ->
             str(g["attach"]),
             frame_of(g.get("offset")),
             str(g.get("prefix", "gripper/")),
+            tuple(
+                (str(c["joint"]), str(c["to"]), float(c.get("ratio", 1.0)))
+                for c in g.get("couple", ())
+            ),
         ),
         servo=None
         if servo is None

@@ -48,6 +48,10 @@ class GripperFile:
     """The arm's site or body it is attached to (its root body's frame goes there)."""
     offset: Frame
     prefix: str = "gripper/"
+    couple: tuple[tuple[str, str, float], ...] = ()
+    """``(joint, to, ratio)``: ``joint`` follows ``to`` (``q_joint = ratio * q_to``, a joint
+    equality) and the vendor's actuators on ``joint`` are left out, so that one actuator
+    drives the gripper (robosuite's grippers drive each finger by its own)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -185,6 +189,7 @@ def robot_spec(comp: Composition, arm_joints: tuple[str, ...], where: str) -> mu
             warnings.simplefilter("ignore")
             for body in _roots(gspec):
                 inner.attach_body(body, g.prefix, "")
+        _couple(spec, g.couple, f"{where}: gripper.couple")
     if comp.poi is not None:
         p = comp.poi
         site = spec.site(p.at)
@@ -204,6 +209,24 @@ def robot_spec(comp: Composition, arm_joints: tuple[str, ...], where: str) -> mu
             body.set_frame(mount)
     grasp_options(spec)
     return spec
+
+
+def _couple(spec: mujoco.MjSpec, couple: tuple[tuple[str, str, float], ...], where: str) -> None:
+    """Each ``joint`` follows ``to`` by a joint equality; actuators on ``joint`` go."""
+    for joint, to, ratio in couple:
+        for name in (joint, to):
+            if spec.joint(name) is None:
+                raise SceneError(f"{where}: the composed robot has no joint {name!r}")
+        spec.add_equality(
+            type=mujoco.mjtEq.mjEQ_JOINT,
+            objtype=mujoco.mjtObj.mjOBJ_JOINT,
+            name1=joint,
+            name2=to,
+            data=[0.0, ratio] + [0.0] * 10,
+        )
+        for act in list(spec.actuators):
+            if act.trntype == mujoco.mjtTrn.mjTRN_JOINT and act.target == joint:
+                spec.delete(act)
 
 
 def _same_options(child: mujoco.MjSpec, parent: mujoco.MjSpec) -> None:
