@@ -337,3 +337,36 @@ def test_a_gripper_that_drives_each_finger_is_coupled_to_one_actuator(
     q1 = data.qpos[model.jnt_qposadr[model.joint("gripper/finger_joint1").id]]
     q2 = data.qpos[model.jnt_qposadr[model.joint("gripper/finger_joint2").id]]
     assert q1 == pytest.approx(0.04, abs=0.003) and q2 == pytest.approx(-q1, abs=0.002)
+
+
+def test_urdf_robot_file_gives_the_same_robot_as_its_mjcf_twin(vendor_models: Path) -> None:
+    """tests/robots/vendor_panda_urdf (the URDF's arm, robosuite's hand attached at its
+    flange) and tests/robots/vendor_panda (robosuite's MJCF arm): the same joints (axes,
+    anchors, limits) and the same POI at home, within 1 mm (the flanges differ by 0.5 mm:
+    0.107 m in the URDF, 0.1065 m in robosuite's MJCF)."""
+    from smccli.world.robot import robot_model_spec
+
+    poses = []
+    for name in ("vendor_panda", "vendor_panda_urdf"):
+        robot = load_robot(TESTS / "robots" / name / "robot.yaml")
+        model = robot_model_spec(robot).compile()
+        data = mujoco.MjData(model)
+        ids = [model.joint(j).id for j in robot.arm_joints]
+        data.qpos[model.jnt_qposadr[ids]] = robot.home
+        mujoco.mj_kinematics(model, data)
+        site = model.site(robot.poi).id
+        poses.append(
+            (
+                data.xaxis[ids].copy(),
+                data.xanchor[ids].copy(),
+                model.jnt_range[ids].copy(),
+                data.site_xpos[site].copy(),
+                data.site_xmat[site].reshape(3, 3).copy(),
+            )
+        )
+    (ax0, an0, r0, p0, R0), (ax1, an1, r1, p1, R1) = poses
+    np.testing.assert_allclose(ax0, ax1, atol=1e-3)
+    np.testing.assert_allclose(an0, an1, atol=1e-3)
+    np.testing.assert_allclose(r0, r1, atol=1e-4)
+    assert np.linalg.norm(p0 - p1) < 1e-3
+    np.testing.assert_allclose(R0, R1, atol=1e-3)
