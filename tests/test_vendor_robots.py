@@ -370,3 +370,45 @@ def test_urdf_robot_file_gives_the_same_robot_as_its_mjcf_twin(vendor_models: Pa
     np.testing.assert_allclose(r0, r1, atol=1e-4)
     assert np.linalg.norm(p0 - p1) < 1e-3
     np.testing.assert_allclose(R0, R1, atol=1e-3)
+
+
+def test_a_hand_written_mjcf_with_meshes_relative_to_it_works_from_any_scene_folder(
+    vendor_models: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Trap 2 for a plain ``mjcf:`` robot file: the six arm with a decoration mesh under a
+    ``meshdir`` relative to its robot.xml (a UR5e base from the vendor folder), as
+    Menagerie's files give theirs; `smc robots` and a scene in another folder, run from a
+    third, both take it; and the scene carries the mesh file (Scene.assets) for its logs."""
+    robot_dir = tmp_path / "robots" / "six"
+    shutil.copytree(TESTS / "robots" / "six", robot_dir)
+    meshes = os.path.relpath(vendor_models / RS / "robots" / "ur5e" / "meshes", robot_dir)
+    xml = robot_dir / "robot.xml"
+    text = xml.read_text()
+    text = text.replace(
+        "<worldbody>",
+        f'<compiler meshdir="{meshes}"/><asset><mesh name="deco" file="base.stl"/></asset>'
+        "<worldbody>",
+        1,
+    )
+    deco = (
+        '<body name="deco" pos="-0.3 0 0"><geom type="mesh" mesh="deco" group="3" '
+        'contype="0" conaffinity="0"/></body></worldbody>'
+    )
+    xml.write_text(text.replace("</worldbody>", deco, 1))
+    scene_dir = tmp_path / "scenes" / "deep" / "six_pick"
+    scene_dir.mkdir(parents=True)
+    text = (TESTS / "scenes" / "six_pick" / "scene.yaml").read_text()
+    text = text.replace("../../../smccli", f"{REPO}/smccli")
+    text = text.replace(
+        "../../robots/six/robot.yaml", os.path.relpath(robot_dir / "robot.yaml", scene_dir)
+    )
+    (scene_dir / "scene.yaml").write_text(text)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    assert load_robot(robot_dir / "robot.yaml").name == "six"
+    scene = load_scene(scene_dir / "scene.yaml")
+    assert scene.model().mesh("deco").id >= 0
+    assert [Path(name).name for name, _ in scene.assets] == ["base.stl"]
+    proc = smc("robots", robot_dir / "robot.yaml", cwd=elsewhere)
+    assert proc.returncode == 0, proc.stderr

@@ -21,7 +21,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -189,6 +189,10 @@ def load_robot(name_or_path: str | Path, relative_to: Path | None = None) -> Rob
             what = "MJCF file" if file.suffix.lower() == ".xml" else "file"
             raise SceneError(f"{path}: {doc.where(at)}: {what} {file} not found")
     robot = _robot(doc, text, path, mjcf)
+    if robot.composition is None and _names_files(mjcf):
+        # Composed, its files' paths are made absolute from its own folder (not left to how
+        # MuJoCo resolves an included file's assets) and a scene carries their bytes.
+        robot = replace(robot, composition=Composition(arm=mjcf.resolve()))
     if robot.composition is not None:
         spec = robot_spec(robot.composition, robot.arm_joints, str(path))
         try:
@@ -207,6 +211,15 @@ def load_robot(name_or_path: str | Path, relative_to: Path | None = None) -> Rob
     check_robot(robot, model, doc, mjcf.name, SceneError)
     _check_geom_group(robot, model, doc, mjcf.name)
     return robot
+
+
+def _names_files(mjcf: Path) -> bool:
+    """Whether the MJCF names mesh, texture, height-field or skin files."""
+    try:
+        spec = mujoco.MjSpec.from_file(str(mjcf))
+    except ValueError as exc:
+        raise SceneError(f"{mjcf}: MuJoCo rejects the MJCF: {' '.join(str(exc).split())}") from None
+    return any(a.file for a in (*spec.meshes, *spec.textures, *spec.hfields, *spec.skins))
 
 
 def robot_model_spec(robot: Robot) -> mujoco.MjSpec:
