@@ -94,9 +94,15 @@ class RobotModel:
     bodies: np.ndarray
 
     @classmethod
-    def from_mjcf(cls, mjcf_xml: str, joint_names: tuple[str, ...]) -> RobotModel:
-        """Build from a self-contained MJCF (as attached to every log)."""
-        model = mujoco.MjModel.from_xml_string(mjcf_xml)
+    def from_mjcf(
+        cls,
+        mjcf_xml: str,
+        joint_names: tuple[str, ...],
+        assets: dict[str, bytes] | None = None,
+    ) -> RobotModel:
+        """Build from a self-contained MJCF (as attached to every log) and the files it
+        names (``Scene.assets``; a vendor robot's meshes)."""
+        model = mujoco.MjModel.from_xml_string(mjcf_xml, assets or None)
         return cls(model, mujoco.MjData(model), joint_names, robot_body_ids(model, joint_names))
 
     def geometry_for(self, positions: np.ndarray) -> RobotGeometry:
