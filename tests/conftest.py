@@ -135,3 +135,20 @@ def reseeded_logs(tmp_path_factory) -> dict[int, dict[str, list[Path]]]:
                     paths.append(path)
                 out[seed][scene] = paths
     return out
+
+
+@pytest.fixture(scope="session")
+def vendor_models() -> Path:
+    """The vendors' model files `make models` unpacks (smccli/world/vendor.py). Missing:
+    the test is skipped with the command to run, except in CI (``CI=true``), where it fails."""
+    from smccli.world.vendor import VENDOR_DIR, WHEELS
+
+    missing = [w.filename for w in WHEELS if not (VENDOR_DIR / f".{w.filename}.unpacked").is_file()]
+    if missing:
+        why = (
+            f"vendor models not unpacked in {VENDOR_DIR} ({', '.join(missing)}): run `make models`"
+        )
+        if os.environ.get("CI", "").lower() in ("true", "1"):
+            pytest.fail(why)
+        pytest.skip(why)
+    return VENDOR_DIR

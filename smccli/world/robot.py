@@ -1,8 +1,12 @@
 """Robots as data: an MJCF plus a robot file (YAML, ``schemas/robot.schema.json``).
 
 The robot file says what the code must not hard-wire: the arm's joints, actuators and home
-posture, the POI site, the gripper (joints, actuator, opening range), base joints if mobile,
-the geom group of the robot's own geoms and the sensors mounted on it. The controller, the
+posture, the POI site, the gripper (joints, actuator, opening range), base joints if mobile
+and the sensors mounted on it. It names the vendor's files as they are: the arm's ``mjcf:``
+or ``urdf:``, a gripper's own ``mjcf:`` attached to the arm; :mod:`smccli.world.robot_compose`
+composes them (without a gripper file, servos or a URDF, the arm's MJCF is used as written).
+Which geoms are the robot's is read from the model (the bodies under its root);
+``geom_group`` narrows them to one group where an older robot file gives it. The controller, the
 simulation, the self-filter and the operators are built from a :class:`Robot`; no module
 names a joint. Built-in robots live in ``smccli/world/robots/<name>/robot.yaml``; a scene
 names its robot by name or by the path of a robot file.
@@ -17,7 +21,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +30,16 @@ import numpy as np
 
 from smccli.errors import SceneError, SmcError
 from smccli.schemas import YamlDocument, check_yaml, parse_yaml
+from smccli.world.robot_compose import (
+    POI_SITE,
+    SERVO_PREFIX,
+    Composition,
+    GripperFile,
+    PoiPlacement,
+    Servo,
+    frame_of,
+    robot_spec,
+)
 
 ROBOTS_DIR = Path(__file__).parent / "robots"
 DEFAULT_ROBOT = "arm"
@@ -44,10 +58,14 @@ class Gripper:
     """Each finger joint's position when closed [m or rad]."""
     open: float
     """Each finger joint's position when fully open [m or rad]."""
+    commands: tuple[float, float] | None = None
+    """The actuator's command when closed and when open, in its own units (a tendon
+    actuator's 0-255, ...); None: the joint positions :attr:`closed`, :attr:`open`."""
 
     def target(self, opening: float) -> float:
-        """Actuator target for an opening command in [0, 1] (0 closed, 1 open)."""
-        return self.closed + float(np.clip(opening, 0.0, 1.0)) * (self.open - self.closed)
+        """Actuator command for an opening in [0, 1] (0 closed, 1 open)."""
+        closed, open_ = self.commands or (self.closed, self.open)
+        return closed + float(np.clip(opening, 0.0, 1.0)) * (open_ - closed)
 
     def opening(self, q: np.ndarray) -> float:
         """Opening in [0, 1] from the finger joint positions ``q`` (mean over fingers)."""
@@ -95,14 +113,20 @@ class Robot:
     gripper: Gripper | None = None
     """The gripper (with an arm), else None."""
     base: Base | None = None
-    geom_group: int = 3
-    """MJCF geom group holding the robot's own geoms."""
+    geom_group: int | None = None
+    """The geom group of the robot's own geoms where the robot file gives one (older files:
+    every robot geom in it); None: the robot's geoms are those of its bodies, in whatever
+    groups the model puts them (:func:`robot_geoms`)."""
     sensors: tuple[SensorMount, ...] = ()
     description: str = ""
     path: Path | None = None
     """The robot file, or None when rebuilt from a log's attachment."""
     mjcf_path: Path | None = None
-    """The robot's MJCF file, or None when rebuilt from a log."""
+    """The robot's MJCF (or the arm's MJCF or URDF when composed), or None when rebuilt from
+    a log."""
+    composition: Composition | None = None
+    """What smc composes (a gripper file, servos, a URDF, a POI site, a mount); None: the
+    MJCF is used as written (included in the scene)."""
 
     @property
     def dof(self) -> int:
@@ -155,17 +179,55 @@ def load_robot(name_or_path: str | Path, relative_to: Path | None = None) -> Rob
     except (OSError, UnicodeDecodeError) as exc:
         raise SceneError(f"{path}: cannot read robot file: {exc}") from exc
     doc = _document(text, str(path), SceneError)
-    mjcf = path.parent / str(doc.data.get("mjcf", "robot.xml"))
-    if not mjcf.is_file():
-        raise SceneError(f"{path}: {doc.where(('mjcf',))}: MJCF file {mjcf} not found")
-    try:
-        model = mujoco.MjModel.from_xml_path(str(mjcf))
-    except ValueError as exc:
-        raise SceneError(f"{mjcf}: MuJoCo rejects the MJCF: {' '.join(str(exc).split())}") from None
+    key = "urdf" if "urdf" in doc.data else "mjcf"
+    mjcf = path.parent / str(doc.data.get(key, "robot.xml"))
+    files: list[tuple[tuple[str, ...], Path]] = [((key,), mjcf)]
+    if "mjcf" in (doc.data.get("gripper") or {}):
+        files.append((("gripper", "mjcf"), path.parent / str(doc.data["gripper"]["mjcf"])))
+    for at, file in files:
+        if not file.is_file():
+            what = "MJCF file" if file.suffix.lower() == ".xml" else "file"
+            raise SceneError(f"{path}: {doc.where(at)}: {what} {file} not found")
     robot = _robot(doc, text, path, mjcf)
+    if robot.composition is None and _names_files(mjcf):
+        # Composed, its files' paths are made absolute from its own folder (not left to how
+        # MuJoCo resolves an included file's assets) and a scene carries their bytes.
+        robot = replace(robot, composition=Composition(arm=mjcf.resolve()))
+    if robot.composition is not None:
+        spec = robot_spec(robot.composition, robot.arm_joints, str(path))
+        try:
+            model = spec.compile()
+        except ValueError as exc:
+            raise SceneError(
+                f"{path}: the composed robot does not compile: {' '.join(str(exc).split())}"
+            ) from None
+    else:
+        try:
+            model = mujoco.MjModel.from_xml_path(str(mjcf))
+        except ValueError as exc:
+            raise SceneError(
+                f"{mjcf}: MuJoCo rejects the MJCF: {' '.join(str(exc).split())}"
+            ) from None
     check_robot(robot, model, doc, mjcf.name, SceneError)
     _check_geom_group(robot, model, doc, mjcf.name)
     return robot
+
+
+def _names_files(mjcf: Path) -> bool:
+    """Whether the MJCF names mesh, texture, height-field or skin files."""
+    try:
+        spec = mujoco.MjSpec.from_file(str(mjcf))
+    except ValueError as exc:
+        raise SceneError(f"{mjcf}: MuJoCo rejects the MJCF: {' '.join(str(exc).split())}") from None
+    return any(a.file for a in (*spec.meshes, *spec.textures, *spec.hfields, *spec.skins))
+
+
+def robot_model_spec(robot: Robot) -> mujoco.MjSpec:
+    """The robot alone as a spec: composed (:mod:`smccli.world.robot_compose`) or its MJCF
+    as written."""
+    if robot.composition is not None:
+        return robot_spec(robot.composition, robot.arm_joints, str(robot.path))
+    return mujoco.MjSpec.from_file(str(robot.mjcf_path))
 
 
 def robot_from_text(
@@ -183,16 +245,59 @@ def _document(text: str, where: str, error_cls: type[SmcError]) -> YamlDocument:
     return doc
 
 
+def _composition(d: dict[str, Any], path: Path | None, arm_file: Path | None) -> Composition | None:
+    """What the robot file asks smc to compose; None for an MJCF used as written (and for a
+    robot rebuilt from a log, whose model is the log's)."""
+    arm, g, poi = d.get("arm") or {}, d.get("gripper") or {}, d.get("poi")
+    wanted = "urdf" in d or "mjcf" in g or "servo" in arm or "mount" in d or isinstance(poi, dict)
+    if not wanted or path is None or arm_file is None:
+        return None
+    servo = arm.get("servo")
+    n = len(arm.get("joints", ()))
+    return Composition(
+        arm=arm_file.resolve(),
+        gripper=None
+        if "mjcf" not in g
+        else GripperFile(
+            (path.parent / str(g["mjcf"])).resolve(),
+            str(g["attach"]),
+            frame_of(g.get("offset")),
+            str(g.get("prefix", "gripper/")),
+            tuple(
+                (str(c["joint"]), str(c["to"]), float(c.get("ratio", 1.0)))
+                for c in g.get("couple", ())
+            ),
+        ),
+        servo=None
+        if servo is None
+        else Servo(
+            tuple(
+                float(k)
+                for k in (servo["kp"] if isinstance(servo["kp"], list) else [servo["kp"]] * n)
+            ),
+            float(servo.get("dampratio", 1.0)),
+            bool(servo.get("gravcomp", True)),
+        ),
+        poi=PoiPlacement(str(poi["at"]), frame_of(poi)) if isinstance(poi, dict) else None,
+        mount=frame_of(d["mount"]) if "mount" in d else None,
+    )
+
+
 def _robot(doc: YamlDocument, text: str, path: Path | None, mjcf: Path | None) -> Robot:
     d: dict[str, Any] = doc.data
     arm, g, base = d.get("arm") or {}, d.get("gripper"), d.get("base")
+    joints = tuple(str(j) for j in arm.get("joints", ()))
+    actuators = tuple(str(a) for a in arm.get("actuators", ()))
+    if "servo" in arm and not actuators:
+        actuators = tuple(SERVO_PREFIX + j for j in joints)
+    poi = d["poi"]
     return Robot(
         name=str(d["name"]),
         yaml_text=text,
-        arm_joints=tuple(str(j) for j in arm.get("joints", ())),
-        arm_actuators=tuple(str(a) for a in arm.get("actuators", ())),
+        arm_joints=joints,
+        arm_actuators=actuators,
         home=tuple(float(v) for v in arm.get("home", ())),
-        poi=str(d["poi"]),
+        poi=POI_SITE if isinstance(poi, dict) else str(poi),
         gripper=None
         if g is None
         else Gripper(
@@ -200,9 +305,13 @@ def _robot(doc: YamlDocument, text: str, path: Path | None, mjcf: Path | None) -
             actuator=str(g["actuator"]),
             closed=float(g["opening"][0]),
             open=float(g["opening"][1]),
+            commands=(float(g["commands"][0]), float(g["commands"][1]))
+            if "commands" in g
+            else None,
         ),
         base=Base(tuple(base["joints"]), tuple(base["actuators"])) if base else None,  # type: ignore[arg-type]
-        geom_group=int(d.get("geom_group", 3)),
+        geom_group=int(d["geom_group"]) if "geom_group" in d else None,
+        composition=_composition(d, path, mjcf),
         sensors=tuple(
             SensorMount(str(s["name"]), str(s["type"]), str(s.get("camera") or s.get("site") or ""))
             for s in d.get("sensors") or ()
@@ -345,8 +454,11 @@ def _vec3(v: np.ndarray) -> str:
 
 
 def _check_geom_group(robot: Robot, model: mujoco.MjModel, doc: YamlDocument, label: str) -> None:
-    """In the robot's own MJCF every geom is in ``geom_group`` (what lidar and self-filter
-    rely on)."""
+    """Where the robot file gives ``geom_group`` (an override: lidar and self-filter then
+    use that group alone), every geom of the robot's own MJCF is in it. Without it any
+    groups are fine: the model says which geoms are the robot's."""
+    if robot.geom_group is None:
+        return
     for g in range(model.ngeom):
         if int(model.geom_group[g]) != robot.geom_group:
             name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) or f"#{g}"
@@ -358,16 +470,38 @@ def _check_geom_group(robot: Robot, model: mujoco.MjModel, doc: YamlDocument, la
 
 
 def robot_geoms(robot: Robot, model: mujoco.MjModel) -> np.ndarray:
-    """Ids of the robot's own geoms in a scene model: those of the bodies its joints move
-    and of their ancestors up to the root, restricted to its geom group."""
+    """Ids of the robot's own geoms in a scene model: those of the bodies under the robot's
+    root (the top body above its POI), restricted to ``geom_group`` where the robot file
+    gives one; collision and visual geoms alike."""
     root = int(model.body_rootid[model.site_bodyid[model.site(robot.poi).id]])
     ids = [
         g
         for g in range(model.ngeom)
         if int(model.body_rootid[model.geom_bodyid[g]]) == root
-        and int(model.geom_group[g]) == robot.geom_group
+        and (robot.geom_group is None or int(model.geom_group[g]) == robot.geom_group)
     ]
     return np.array(ids, dtype=int)
+
+
+def robot_only_groups(robot: Robot, model: mujoco.MjModel) -> tuple[int, ...]:
+    """The geom groups a sensor may skip to skip the robot: ``geom_group`` where the robot
+    file gives it, else the groups the robot's geoms use and no other geom does (a group
+    shared with the scene stays visible: its robot geoms are then seen)."""
+    if robot.geom_group is not None:
+        return (robot.geom_group,)
+    mine = robot_geoms(robot, model)
+    others = np.setdiff1d(np.arange(model.ngeom), mine)
+    return tuple(
+        int(g)
+        for g in np.unique(model.geom_group[mine])
+        if not np.any(model.geom_group[others] == g)
+    )
+
+
+def is_collision_geom(model: mujoco.MjModel, geom: int) -> bool:
+    """A geom collides when its contype or conaffinity is non-zero; it is visual otherwise
+    (what the model says, whatever group it sits in)."""
+    return bool(model.geom_contype[geom] or model.geom_conaffinity[geom])
 
 
 def kinematics_digest(robot: Robot, model: mujoco.MjModel) -> str:

@@ -23,10 +23,11 @@ def robot_body_ids(model: mujoco.MjModel, joint_names: tuple[str, ...]) -> np.nd
     """The robot's bodies: those the named joints move (with their descendants) and the
     fixed ones they hang from, up to the robot's root (a pedestal, a mounting plate).
 
-    The fixed ones count only when their geoms are in the moving links' geom group (the
-    robot's, which ``smc robots`` checks is one): a scene may hang the robot from a body
-    of its own, a table or a cart, which is not the robot. Without the pedestal the
-    camera saw the robot's base as an object wherever the crop box reached it.
+    The fixed ones count only when their geoms are in the groups the moving links' geoms
+    use (a robot file's ``geom_group``, or a vendor's visual and collision groups): a scene
+    may hang the robot from a body of its own, a table or a cart, which is not the robot.
+    Without the pedestal the camera saw the robot's base as an object wherever the crop
+    box reached it.
     """
     ids: set[int] = set()
     roots = {int(model.jnt_bodyid[model.joint(n).id]) for n in joint_names}
@@ -39,12 +40,12 @@ def robot_body_ids(model: mujoco.MjModel, joint_names: tuple[str, ...]) -> np.nd
             a = int(model.body_parentid[a])
     moving = [g for g in range(model.ngeom) if int(model.geom_bodyid[g]) in ids]
     if moving:
-        group = int(np.bincount(model.geom_group[moving]).argmax())
+        groups = set(model.geom_group[moving].tolist())
         for root in roots:
             a = int(model.body_parentid[root])
             while a > 0:
                 geoms = range(model.body_geomadr[a], model.body_geomadr[a] + model.body_geomnum[a])
-                if all(int(model.geom_group[g]) == group for g in geoms):
+                if all(int(model.geom_group[g]) in groups for g in geoms):
                     ids.add(a)
                 a = int(model.body_parentid[a])
     return np.array(sorted(ids), dtype=int)
@@ -93,9 +94,15 @@ class RobotModel:
     bodies: np.ndarray
 
     @classmethod
-    def from_mjcf(cls, mjcf_xml: str, joint_names: tuple[str, ...]) -> RobotModel:
-        """Build from a self-contained MJCF (as attached to every log)."""
-        model = mujoco.MjModel.from_xml_string(mjcf_xml)
+    def from_mjcf(
+        cls,
+        mjcf_xml: str,
+        joint_names: tuple[str, ...],
+        assets: dict[str, bytes] | None = None,
+    ) -> RobotModel:
+        """Build from a self-contained MJCF (as attached to every log) and the files it
+        names (``Scene.assets``; a vendor robot's meshes)."""
+        model = mujoco.MjModel.from_xml_string(mjcf_xml, assets or None)
         return cls(model, mujoco.MjData(model), joint_names, robot_body_ids(model, joint_names))
 
     def geometry_for(self, positions: np.ndarray) -> RobotGeometry:

@@ -12,6 +12,7 @@ An object's pose is that of its bounding-box centre: ``(x, y, z, yaw)`` [m, m, m
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
@@ -32,7 +33,9 @@ from smccli.world.robot import (
     load_robot,
     resolve_robot_path,
     robot_from_text,
+    robot_model_spec,
 )
+from smccli.world.robot_compose import asset_files, names_by_kind
 from smccli.world.scene_file import (
     key_at,
     parse_declarations,
@@ -53,6 +56,7 @@ from smccli.world.specs import (
 )
 
 __all__ = [
+    "ASSET_PREFIX",
     "GROUPS",
     "HIDDEN_GROUP",
     "RELATIONS",
@@ -80,6 +84,8 @@ __all__ = [
 """The scene's vocabulary (:mod:`smccli.world.specs`, :mod:`smccli.world.criteria`) is
 importable from here too, where its users look for it."""
 
+ASSET_PREFIX = "asset:"
+"""A log attaches each file of :attr:`Scene.assets` as ``asset:<name>``."""
 SCENES_DIR = Path(__file__).parent / "scenes"
 """The built-in scenes, one folder each (``scene.yaml``, ``scene.xml``)."""
 
@@ -119,12 +125,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
             except SceneError as exc:
                 raise SceneError(f"{key_at(yaml_text, str(path), ('robot',))}: {exc}") from None
             robot = load_robot(robot_file)
-            # The robot first: its <option> and <compiler> apply, the scene's may refine them.
-            spec = mujoco.MjSpec.from_string(
-                f"<mujoco model={quoteattr(str(raw['name']))}>"
-                f"<include file={quoteattr(str(robot.mjcf_path))}/>"
-                f"<include file={quoteattr(str(mjcf_file.resolve()))}/></mujoco>"
-            )
+            spec = _with_robot(str(raw["name"]), robot, mjcf_file)
         else:  # a scene file from before robot files: its MJCF includes the built-in arm
             robot = load_robot(DEFAULT_ROBOT)
             spec = mujoco.MjSpec.from_file(str(mjcf_file))
@@ -134,12 +135,57 @@ def load_scene(name_or_path: str | Path) -> Scene:
     return _replace_path(scene, path)
 
 
+def _with_robot(name: str, robot: Robot, mjcf_file: Path) -> mujoco.MjSpec:
+    """The scene's spec holding the robot: its MJCF included first (its <option> and
+    <compiler> apply, the scene's may refine them), then the scene's. A composed robot
+    (:mod:`smccli.world.robot_compose`) is included as the self-contained MJCF it composes
+    to, after a check that no name is both the robot's and the scene's."""
+    head = f"<mujoco model={quoteattr(name)}>"
+    scene_inc = f"<include file={quoteattr(str(mjcf_file.resolve()))}/></mujoco>"
+    if robot.composition is None:
+        return mujoco.MjSpec.from_string(
+            f"{head}<include file={quoteattr(str(robot.mjcf_path))}/>{scene_inc}"
+        )
+    robot_spec = robot_model_spec(robot)
+    _check_names(robot, robot_spec, mjcf_file)
+    key = f"{robot.name}.robot.xml"
+    return mujoco.MjSpec.from_string(
+        f"{head}<include file={quoteattr(key)}/>{scene_inc}",
+        include={key: robot_spec.to_xml().encode()},
+    )
+
+
+def _check_names(robot: Robot, robot_spec: mujoco.MjSpec, mjcf_file: Path) -> None:
+    """SceneError naming both files for the first element name the robot and the scene
+    share (MuJoCo's own message names neither)."""
+    mjcf_file = Path(os.path.normpath(mjcf_file))
+    theirs = names_by_kind(mujoco.MjSpec.from_file(str(mjcf_file)))
+    mine = names_by_kind(robot_spec)
+    for kind, names in mine.items():
+        both = sorted(names & theirs.get(kind, set()))
+        if both:
+            comp = robot.composition
+            files = [str(robot.path)]
+            if comp is not None:
+                files = [str(comp.arm)] + ([str(comp.gripper.mjcf)] if comp.gripper else [])
+            raise SceneError(
+                f"{mjcf_file}: {kind} {both[0]!r} is also a {kind} of robot {robot.name!r} "
+                f"({' + '.join(files)}, robot file {robot.path}): rename the scene's"
+            )
+
+
 def load_scene_from_text(
-    yaml_text: str, mjcf_text: str, robot_yaml: str | None = None, *, log: str | None = None
+    yaml_text: str,
+    mjcf_text: str,
+    robot_yaml: str | None = None,
+    *,
+    log: str | None = None,
+    assets: Mapping[str, bytes] | None = None,
 ) -> Scene:
     """Rebuild a scene from the texts a log embeds (``Scene.yaml_text``, ``Scene.mjcf``,
-    ``Robot.yaml_text``). A log from before robot files has no robot file: its scene holds
-    the built-in robot its scene file names (the arm).
+    ``Robot.yaml_text``) and the files its MJCF names (``assets``, :attr:`Scene.assets`).
+    A log from before robot files has no robot file: its scene holds the built-in robot
+    its scene file names (the arm).
 
     ``log``: the log file the texts were attached to; errors are then LogError naming it
     and the attachment (``demo.mcap: attachment scene.yaml: ...``), else SceneError.
@@ -150,7 +196,7 @@ def load_scene_from_text(
     try:
         raw = read_scene_yaml(yaml_text, at_yaml)
         try:
-            model = mujoco.MjModel.from_xml_string(mjcf_text)
+            model = mujoco.MjModel.from_xml_string(mjcf_text, dict(assets or {}) or None)
         except ValueError as exc:
             raise SceneError(
                 f"{at_xml}: MuJoCo rejects the MJCF ({' '.join(str(exc).split())})"
@@ -163,7 +209,8 @@ def load_scene_from_text(
             robot_yaml = (ROBOTS_DIR / name / "robot.yaml").read_text()
         robot, doc = robot_from_text(robot_yaml, at_robot)
         check_robot(robot, model, doc, "attachment scene.xml", SceneError)
-        return scene_from_file(raw, yaml_text, mjcf_text, at_yaml, robot, model)
+        scene = scene_from_file(raw, yaml_text, mjcf_text, at_yaml, robot, model)
+        return replace(scene, assets=tuple(sorted((assets or {}).items())))
     except SceneError as exc:
         if log is None:
             raise
@@ -191,6 +238,11 @@ def scene_of_log(attachments: Mapping[str, bytes], log: str | Path) -> Scene:
         texts["scene.xml"] or "",
         texts["robot.yaml"],
         log=str(log),
+        assets={
+            name.removeprefix(ASSET_PREFIX): bytes(data)
+            for name, data in attachments.items()
+            if name.startswith(ASSET_PREFIX)
+        },
     )
 
 
@@ -226,8 +278,10 @@ def _build(
     except ValueError as exc:
         raise SceneError(f"{where}: model does not compile: {exc}") from exc
     mjcf = spec.to_xml()
-    model = mujoco.MjModel.from_xml_string(mjcf)
-    return scene_from_file(raw, yaml_text, mjcf, where, robot, model)
+    assets = asset_files(spec) if robot.composition is not None else {}
+    model = mujoco.MjModel.from_xml_string(mjcf, assets or None)
+    scene = scene_from_file(raw, yaml_text, mjcf, where, robot, model)
+    return replace(scene, assets=tuple(sorted(assets.items())))
 
 
 def _replace_path(scene: Scene, path: Path) -> Scene:

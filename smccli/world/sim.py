@@ -29,6 +29,7 @@ from smccli.world.layout import nominal_layout, place_objects
 from smccli.world.lidar import Lidar, LidarReading
 from smccli.world.marker import MARKER_BODY, MARKER_RADIUS, with_target_marker
 from smccli.world.noise import NoisySensors
+from smccli.world.robot import robot_only_groups
 from smccli.world.robot_model import RobotModel
 from smccli.world.scene import HIDDEN_GROUP, ROBOT_KEY, Layout, ObjectSpec, Scene
 from smccli.world.sensors import (
@@ -162,7 +163,8 @@ class Sim:
         self._lidar_site = -1
         for s in self.robot.sensors:
             if s.type == "lidar":
-                self._lidar = Lidar(m, s.target, ignore_group=(self.robot.geom_group, HIDDEN_GROUP))
+                own = robot_only_groups(self.robot, m)
+                self._lidar = Lidar(m, s.target, ignore_group=(*own, HIDDEN_GROUP))
                 self._lidar_site = self._id(mujoco.mjtObj.mjOBJ_SITE, s.target)
         self._cam_id = self._id(mujoco.mjtObj.mjOBJ_CAMERA, scene.camera.name)
         self._scale_sensor = None

@@ -171,6 +171,10 @@ class Scene:
     perception: tuple[tuple[str, object], ...] = ()
     """Perception settings the scene's trees start with (scene.yaml ``perception``), as
     (name, value) pairs of :class:`~smccli.perception.params.PerceptionParams` fields."""
+    assets: tuple[tuple[str, bytes], ...] = ()
+    """The files the MJCF names (a vendor robot's meshes and textures), as (the name in
+    :attr:`mjcf`, bytes): the model compiles from them where those files are not (a log's
+    ``asset:<name>`` attachments). Empty when the MJCF names no file."""
 
     def place(self, name: str) -> tuple[float, float, float]:
         """The place called ``name``; SceneError listing the valid names otherwise."""
@@ -218,6 +222,6 @@ class Scene:
     def model(self) -> mujoco.MjModel:
         """Compile the MJCF into a fresh model."""
         try:
-            return mujoco.MjModel.from_xml_string(self.mjcf)
+            return mujoco.MjModel.from_xml_string(self.mjcf, dict(self.assets) or None)
         except ValueError as exc:
             raise SceneError(f"scene {self.name}: MJCF does not compile: {exc}") from exc
