@@ -28,6 +28,7 @@ from smccli.inspect.views import TIMELINE
 from smccli.learn.frames import goal_at_scan_pose
 from smccli.learn.tree import Edge, Tree
 from smccli.world.geometry import compose, from_frame, wrap_yaw, xyzw, yaw_of, yaw_quat
+from smccli.world.robot import robot_geoms
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -101,7 +102,7 @@ def _scene_geometry(scene: Scene) -> MobileView:
         lidar_z = float(data.site_xpos[sid][2])
     footprint = None
     pid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, robot.poi)
-    own = np.flatnonzero(model.geom_group == robot.geom_group)
+    own = robot_geoms(robot, model)
     if pid >= 0 and len(own) and not robot.arm_joints:
         yaw = yaw_of(data.site_xmat[pid])
         signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)])

@@ -81,7 +81,7 @@ def read_ros2_bag(
 
 
 def _read(path: Path, src: BagSource, topic_map: TopicMap, warn: Callable[[str], None]) -> Log:
-    from smccli.world.scene import load_scene
+    from smccli.world.scene import ASSET_PREFIX, load_scene
 
     types, counts, attachments, metadata = src.types, src.counts, src.attachments, src.metadata
     for role, topic in topic_map.topics.items():
@@ -99,6 +99,7 @@ def _read(path: Path, src: BagSource, topic_map: TopicMap, warn: Callable[[str],
             "scene.yaml": scene.yaml_text.encode(),
             "scene.xml": scene.mjcf.encode(),
             "robot.yaml": scene.robot.yaml_text.encode(),
+            **{f"{ASSET_PREFIX}{n}": b for n, b in scene.assets},
         }
     meta = metadata.get(tp.METADATA_NAME) or {
         "scene": scene.name,

@@ -27,6 +27,7 @@ from smccli.errors import LogError, OutputExistsError
 from smccli.logs import topics as tp
 from smccli.outputs import check_output
 from smccli.world.geometry import matrix_quat, yaw_quat
+from smccli.world.scene import ASSET_PREFIX
 from smccli.world.sensors import CameraFrame, JointState, PoiCommand, SaliencyMark
 
 if TYPE_CHECKING:
@@ -455,4 +456,6 @@ def scene_attachments(scene: Scene) -> dict[str, tuple[str, bytes]]:
         "scene.xml": ("application/xml", scene.mjcf.encode()),
         "scene.yaml": ("application/yaml", scene.yaml_text.encode()),
         "robot.yaml": ("application/yaml", scene.robot.yaml_text.encode()),
+        # The files the MJCF names (a vendor robot's meshes): the log opens anywhere.
+        **{f"{ASSET_PREFIX}{n}": ("application/octet-stream", b) for n, b in scene.assets},
     }

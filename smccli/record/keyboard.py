@@ -88,6 +88,7 @@ from smccli.record.hud import (
 )
 from smccli.record.operators import OperatorOutput
 from smccli.world.geometry import wrap
+from smccli.world.robot import robot_geoms
 from smccli.world.sensors import PoiCommand, SaliencyMark
 from smccli.world.sim import HIDDEN_GROUP, Sim
 
@@ -323,8 +324,13 @@ class KeyboardOperator:
         import mujoco
 
         sim, opt = self.sim, self.viewer.opt
-        # MuJoCo's viewer shows geom groups 0-2; the robot's own geoms sit in their group.
-        opt.geomgroup[sim.robot.geom_group] = 1
+        # MuJoCo's viewer shows geom groups 0-2; the robot's may sit in another: show the
+        # groups of its visual geoms (those that collide with nothing), or all of its own.
+        m = sim.model
+        own = robot_geoms(sim.robot, m)
+        visual = [g for g in own if m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0]
+        for group in {int(m.geom_group[g]) for g in (visual or own)}:
+            opt.geomgroup[group] = 1
         opt.geomgroup[HIDDEN_GROUP] = 1
         # Visualisation flags the viewer toggles on letters this operator uses (and, for
         # a base, on A and D: W/A/S/D come to hand, and D would hide the walls).

@@ -23,7 +23,7 @@ def with_target_marker(scene: Scene) -> mujoco.MjModel:
     the physics is the scene's to the bit (``tests/test_keyboard.py`` checks it); the
     sensor camera and the lidar leave the marker's group out.
     """
-    spec = mujoco.MjSpec.from_string(scene.mjcf)
+    spec = mujoco.MjSpec.from_string(scene.mjcf, assets=dict(scene.assets) or None)
     body = spec.worldbody.add_body(name=MARKER_BODY, mocap=True)
     body.add_geom(
         type=mujoco.mjtGeom.mjGEOM_SPHERE,

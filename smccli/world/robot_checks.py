@@ -34,7 +34,7 @@ import numpy as np
 
 from smccli.errors import SceneError
 from smccli.world.controller import CartesianController, reach_problem
-from smccli.world.robot import Robot, arm_reach
+from smccli.world.robot import Robot, arm_reach, robot_model_spec
 from smccli.world.robot_view import PinholeView, link_spheres, range_corners
 from smccli.world.specs import ObjectSpec, Scene
 
@@ -153,7 +153,7 @@ def robot_alone(robot: Robot, *, table: bool = True) -> mujoco.MjModel:
     if robot.mjcf_path is None:
         raise SceneError(f"robot {robot.name}: no MJCF file to check")
     try:
-        spec = mujoco.MjSpec.from_file(str(robot.mjcf_path))
+        spec = robot_model_spec(robot)  # a vendor's files composed, or the MJCF as written
         if table:
             spec.worldbody.add_geom(
                 name="smc_check_table", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[2.0, 2.0, 0.1]

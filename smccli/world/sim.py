@@ -243,7 +243,8 @@ class Sim:
             d.ctrl[self._arm_act] = home
         if self.robot.gripper is not None:
             d.qpos[self._finger_q] = self.robot.gripper.open
-            d.ctrl[self._grip_act] = self.robot.gripper.open
+            g = self.robot.gripper  # the command in the actuator's units (any: 0-255 ...)
+            d.ctrl[self._grip_act] = g.commands[1] if g.commands else g.open
         if len(self.base_qpos):
             d.qpos[self.base_qpos] = base_pose
             d.ctrl[self._base_act] = base_pose
@@ -457,7 +458,7 @@ class Sim:
         """
         js = self.joint_state()
         if self._robot is None:
-            self._robot = RobotModel.from_mjcf(self.scene.mjcf, js.names)
+            self._robot = RobotModel.from_mjcf(self.scene.mjcf, js.names, dict(self.scene.assets))
         return self._robot.geometry_for(js.position)
 
     # --- camera ------------------------------------------------------------------------
