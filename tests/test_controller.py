@@ -10,11 +10,14 @@ import pytest
 
 from smccli.world.controller import (
     TRACKED,
+    WRIST_MARGIN,
     CartesianController,
+    _svd,
     reachable,
     target_rotation,
     wrap,
 )
+from smccli.world.geometry import yaw_of
 from smccli.world.scene import Scene, load_scene
 from smccli.world.sensors import PoiCommand
 from smccli.world.sim import Sim
@@ -305,6 +308,129 @@ def test_control_ticks_and_full_ik_agree_with_the_pinv_reference(name: str) -> N
         assert np.max(np.abs(q_new - q_old)) < AGREE
         verdicts.append(ok_new)
     assert any(verdicts)
+
+
+# --- the control tick on Python floats against its array form ------------------------------
+
+
+class _ArrayForm:
+    """A control tick as array formulas, the controller's own before its hot path moved to
+    Python floats and views (as of 01c76bd); kept verbatim but for ``self`` -> ``self.c``.
+    The controller promises the same operations in the same order: the same bits."""
+
+    def __init__(self, c: CartesianController) -> None:
+        self.c = c
+        self.q = c.home.copy()
+        self.goal: float | None = None  # the last joint's branch
+        self.locked = 0  # ticks that locked a joint at a limit
+
+    def update(self, target: np.ndarray) -> np.ndarray:
+        c, q, budget = self.c, self.q, self.c.max_step
+        for i in range(c.iterations):
+            c._set(q)
+            sub = self.yaw_subgoal(q, target)
+            e = self.error(sub)
+            if i and e[:3] @ e[:3] < TRACKED[0] ** 2 and e[3:] @ e[3:] < TRACKED[1] ** 2:
+                break
+            q_new = self.ik_step(q, sub, budget, e)
+            budget -= float(np.abs(q_new - q).max())
+            q = q_new
+            if budget <= 1e-9:
+                break
+        self.q = q
+        return q
+
+    def error(self, target: np.ndarray) -> np.ndarray:
+        c = self.c
+        e = np.zeros(6)
+        np.subtract(target[:3], c.data.site_xpos[c.site_id], out=e[:3])
+        co, s = math.cos(target[3]), math.sin(target[3])
+        R_target = np.array([[co, s, 0.0], [s, -co, 0.0], [0.0, 0.0, -1.0]])
+        R_err, quat = np.zeros((3, 3)), np.zeros(4)
+        mujoco.mju_mulMatMatT(R_err, R_target, c.data.site_xmat[c.site_id].reshape(3, 3))
+        mujoco.mju_mat2Quat(quat, R_err.ravel())
+        mujoco.mju_quat2Vel(e[3:], quat, 1.0)
+        return e
+
+    def yaw_subgoal(self, q: np.ndarray, target: np.ndarray) -> np.ndarray:
+        c = self.c
+        yaw = yaw_of(c.data.site_xmat[c.site_id])
+        x, y, _, target_yaw = target.tolist()
+        q_first, q_last_now = q[0].item(), q[-1].item()
+        d = wrap(target_yaw - yaw)
+        q1 = math.atan2(y, x)
+        base = wrap(q1 + c._yaw_offset - target_yaw)
+        branches = [base + k * 2 * math.pi for k in (-1, 0, 1)]
+        lo, hi = float(c.lo[-1]), float(c.hi[-1])
+        inside = [b for b in branches if lo + WRIST_MARGIN < b < hi - WRIST_MARGIN]
+        q_last = min(inside or branches, key=lambda b: abs(b - q_last_now))
+        self.goal = min(max(q_last, lo), hi)
+        planned = (q1 - q_last) - (q_first - q_last_now)
+        d += 2 * math.pi * round((planned - d) / (2 * math.pi))
+        sub = np.array(target, dtype=float)
+        sub[3] = yaw + min(max(d, -0.5), 0.5)
+        return sub
+
+    def ik_step(
+        self, q: np.ndarray, target: np.ndarray, max_step: float, e: np.ndarray
+    ) -> np.ndarray:
+        c = self.c
+        jac = np.zeros((6, c.model.nv))
+        mujoco.mj_jacSite(c.model, c.data, jac[:3], jac[3:], c.site_id)
+        J = jac[:, c.dofadr]
+        posture = c.home - q
+        posture[0] = wrap(math.atan2(target[1], target[0]) - q[0])
+        if self.goal is not None:
+            posture[-1] = self.goal - q[-1]
+        pull = c.nullspace_gain * posture
+        dq = self.step(J, e, pull)
+        at_lo, at_hi = q <= c.lo + 1e-9, q >= c.hi - 1e-9
+        if (at_lo | at_hi).any():
+            self.locked += 1
+            free = np.ones(len(q), dtype=bool)
+            for _ in range(2):
+                pushed = (at_lo & (dq < 0)) | (at_hi & (dq > 0))
+                if not (pushed & free).any():
+                    break
+                free &= ~pushed
+                dq = self.step(J * free, e, pull) * free
+        biggest = max(dq.max(), -dq.min())
+        if biggest > max_step:
+            dq *= max_step / biggest
+        dq += q
+        return dq.clip(c.lo, c.hi, out=dq)
+
+    def step(self, J: np.ndarray, e: np.ndarray, pull: np.ndarray) -> np.ndarray:
+        u, s, vt = _svd(J)
+        c = s / (s * s + self.c.damping**2) * (e @ u)
+        c -= (vt @ pull) * (s > 1e-4 * s[0])
+        return pull + c @ vt
+
+
+@pytest.mark.parametrize("name", [*SCENES, "loco_manip"])
+def test_control_ticks_are_bit_identical_to_the_array_form(name: str) -> None:
+    """1200 control ticks, the target jumping every 60, the arm restarted every 300 from
+    random postures with joints on their limits (the locking path runs): every joint
+    target has the bits of the array form's."""
+    scene = load_scene(name)
+    model = scene.model()
+    ctl = CartesianController(model, scene.robot)
+    ref = _ArrayForm(CartesianController(model, scene.robot))
+    rng = np.random.default_rng(5)
+    target = _work_target(rng)
+    for tick in range(1200):
+        if tick % 300 == 150:
+            q = rng.uniform(ctl.lo, ctl.hi)
+            q[::3] = np.where(rng.random(len(q)) < 0.5, ctl.lo, ctl.hi)[::3]
+            ctl.reset(q)
+            ref.q, ref.goal = q.copy(), None
+        if tick % 60 == 0:
+            target = _work_target(rng)
+        new, old = ctl.update(target), ref.update(target)
+        assert np.array_equal(new, old), (tick, new - old)
+        if tick % 97 == 0:  # another method moves the controller's kinematics meanwhile
+            ctl.forward(rng.uniform(ctl.lo, ctl.hi))
+    assert ref.locked > 20, ref.locked
 
 
 def _last_joint(sim: Sim) -> int:
