@@ -29,6 +29,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 from smccli.errors import SceneError
+from smccli.world.base_frame import BaseFrame, base_frame
 from smccli.world.geometry import TWO_PI, wrap, yaw_of
 from smccli.world.robot import Robot
 
@@ -83,9 +84,11 @@ class CartesianController:
     """Turns POI targets into arm joint targets, one control tick at a time.
 
     Built from a :class:`~smccli.world.robot.Robot`: its arm joints (base to flange), POI
-    site and home posture (the nullspace pulls towards it). The yaw heuristics assume what
-    the robot file promises: the first joint turns about the vertical and the last rolls
-    the gripper when it points down.
+    site and home posture (the nullspace pulls towards it). The yaw heuristics work in the
+    arm's own base frame (:mod:`smccli.world.base_frame`, read from the model at home):
+    they assume what the robot file promises, that the first joint turns about the
+    vertical (up or down) and the last rolls the gripper when it points down (its axis
+    along the approach or against it), wherever the arm's root stands and faces.
 
     A control tick is some sixty calls on vectors of at most 7 entries, where a numpy
     call costs more than its arithmetic: the hot path (:meth:`update`) keeps numpy, LAPACK
@@ -131,9 +134,14 @@ class CartesianController:
         self.q = self.home.copy()
         """Current joint target, shape (n,) [rad]."""
         self._buffers()
-        # Pointing down in the home posture's shape, POI yaw = q_first - q_last + offset;
-        # the offset is the robot's (0 for the arm, pi/4 for the Panda's hand), read at home.
-        self._yaw_offset = wrap(self.forward(self.home)[3] - (self.home[0] - self.home[-1]))
+        self._set(self.home)
+        self.frame: BaseFrame = base_frame(
+            self.data, (jids[0], jids[-1]), self.site_id, (self.home[0], self.home[-1])
+        )
+        """The arm's base frame: the first joint's comfortable angle for a target and how
+        the first and last joints turn the POI's yaw."""
+        self._turn, self._roll = self.frame.turn, self.frame.roll
+        self._yaw_offset = self.frame.yaw_offset
         self._q_last_goal: float | None = None
 
     def _buffers(self) -> None:
@@ -230,8 +238,8 @@ class CartesianController:
         there if known."""
         if e is None:
             e = self._error(target)
-        bearing = math.atan2(target[1], target[0])
-        return self._advance(q, q.tolist(), bearing, max_step, e)
+        x, y, z = target[:3].tolist()
+        return self._advance(q, q.tolist(), self.frame.bearing(x, y, z), max_step, e)
 
     def _advance(
         self,
@@ -242,7 +250,8 @@ class CartesianController:
         e: np.ndarray,
     ) -> np.ndarray:
         """The IK step from ``q`` (also as ``q_list``) at the kinematics and Jacobian inputs
-        last set, ``bearing`` the target's (atan2 of its y, x) [rad], ``e`` the error."""
+        last set, ``bearing`` the first joint's comfortable angle for the target
+        (:meth:`~smccli.world.base_frame.BaseFrame.bearing`) [rad], ``e`` the error."""
         mujoco.mj_jacSite(self.model, self.data, self._jacp, self._jacr, self.site_id)
         J = self._jac[:, self._dofs] if self._jac_arm is None else self._jac_arm
         # Nullspace: keep the elbow and the redundant rolls near the home posture. The base
@@ -297,11 +306,13 @@ class CartesianController:
         """``target`` with its yaw replaced by a waypoint at most 0.5 rad from the current yaw.
 
         The orientation error alone always turns the short way, which can drive the wrist
-        roll into its limit. Pointing down in the home posture's shape, yaw = q_first −
-        q_last + offset (the first joint turns the yaw with it, the last one against it);
-        with q_first settling at the target's bearing, pick the q_last branch inside the
-        limits closest to the current q_last and turn the way that leads there. That
-        branch is also where the posture pull takes q_last (:meth:`_step`), so the
+        roll into its limit. Pointing down in the home posture's shape, yaw = turn q_first
+        − roll q_last + offset (:class:`~smccli.world.base_frame.BaseFrame`: turn and roll
+        are +1 when the first joint turns the yaw with it and the last one against it);
+        with q_first settling at the target's bearing (the angle that points the arm at
+        it, :meth:`~smccli.world.base_frame.BaseFrame.bearing`), pick the q_last branch
+        inside the limits closest to the current q_last and turn the way that leads there.
+        That branch is also where the posture pull takes q_last (:meth:`_step`), so the
         redundant joints do not wind up to trade the last joint's travel for theirs.
         """
         self._set(q)
@@ -309,19 +320,19 @@ class CartesianController:
 
     def _yaw_subgoal(self, q: np.ndarray, target: np.ndarray) -> np.ndarray:
         """:meth:`yaw_subgoal` at the kinematics last set (those of ``q``), into a buffer."""
-        x, y, _, target_yaw = target.tolist()
+        x, y, z, target_yaw = target.tolist()
         sub = self._sub
         sub[:] = target
         sub[3] = self._subgoal_yaw(
-            q[0].item(), q[-1].item(), target_yaw, self._aim(x, y, target_yaw)
+            q[0].item(), q[-1].item(), target_yaw, self._aim(x, y, z, target_yaw)
         )
         return sub
 
-    def _aim(self, x: float, y: float, target_yaw: float) -> tuple[float, list[float]]:
+    def _aim(self, x: float, y: float, z: float, target_yaw: float) -> tuple[float, list[float]]:
         """What :meth:`yaw_subgoal` takes from the target alone: its bearing [rad] and the
         last joint's branches for its yaw, those inside the limits if any [rad]."""
-        q1 = math.atan2(y, x)
-        base = wrap(q1 + self._yaw_offset - target_yaw)
+        q1 = self.frame.bearing(x, y, z)
+        base = wrap(self._roll * (self._turn * q1 + self._yaw_offset - target_yaw))
         branches = [base + k * TWO_PI for k in (-1, 0, 1)]
         lo, hi = self._wrist_lo, self._wrist_hi  # wrist_inside
         return q1, [b for b in branches if lo < b < hi] or branches
@@ -340,7 +351,9 @@ class CartesianController:
             if abs(b - q_last_now) < off:
                 q_last, off = b, abs(b - q_last_now)
         self._q_last_goal = min(max(q_last, self._last_lo), self._last_hi)
-        planned = (q1 - q_last) - (q_first - q_last_now)  # unwrapped yaw change on that branch
+        turn, roll = self._turn, self._roll
+        # The unwrapped yaw change on that branch.
+        planned = (turn * q1 - roll * q_last) - (turn * q_first - roll * q_last_now)
         d += TWO_PI * round((planned - d) / TWO_PI)
         return yaw + min(max(d, -0.5), 0.5)
 
@@ -355,8 +368,9 @@ class CartesianController:
         :meth:`wrist_inside` the limits, :meth:`yaw_subgoal` turns the hand the long way
         round instead, nearly a full turn with whatever it holds (what a goal yaw equivalent
         by the gripper's symmetry avoids, :func:`~smccli.learn.frames.goal_from_object`)."""
-        x, y, _, target_yaw = np.asarray(target, dtype=float).tolist()
-        base = wrap(math.atan2(y, x) + self._yaw_offset - target_yaw)
+        x, y, z, target_yaw = np.asarray(target, dtype=float).tolist()
+        q1 = self.frame.bearing(x, y, z)
+        base = wrap(self._roll * (self._turn * q1 + self._yaw_offset - target_yaw))
         return base + 2 * math.pi * round((q_last_now - base) / (2 * math.pi))
 
     def update(self, target: np.ndarray) -> np.ndarray:
@@ -366,9 +380,9 @@ class CartesianController:
         the others while the POI is not within :data:`TRACKED` of the target. Each is
         :meth:`_ik_step` towards :meth:`yaw_subgoal`, the target's own parts computed once."""
         target = np.asarray(target, dtype=float)
-        x, y, _, target_yaw = target.tolist()
+        x, y, z, target_yaw = target.tolist()
         position = target[:3]
-        aim = self._aim(x, y, target_yaw)
+        aim = self._aim(x, y, z, target_yaw)
         q = self.q
         # The last tick's final check left the kinematics at this q, most ticks.
         placed = q if q.tobytes() == self._placed else None
@@ -408,7 +422,7 @@ class CartesianController:
         target = np.asarray(target, dtype=float)
         q = self.home.copy() if q0 is None else np.asarray(q0, dtype=float).copy()
         # Start the base yaw pointing at the target: avoids the DLS wandering at the start.
-        q[0] = np.clip(math.atan2(target[1], target[0]), self.lo[0], self.hi[0])
+        q[0] = np.clip(self.frame.bearing(*target[:3].tolist()), self.lo[0], self.hi[0])
         for _ in range(max_iterations):
             self._set(q)
             e = self._error(target)
