@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import mujoco
@@ -10,11 +11,15 @@ import pytest
 
 from smccli.world.controller import (
     TRACKED,
+    WRIST_MARGIN,
     CartesianController,
+    _svd,
     reachable,
     target_rotation,
     wrap,
 )
+from smccli.world.geometry import yaw_of
+from smccli.world.robot import Robot, load_robot
 from smccli.world.scene import Scene, load_scene
 from smccli.world.sensors import PoiCommand
 from smccli.world.sim import Sim
@@ -115,7 +120,8 @@ def test_wrap() -> None:
 class _Reference:
     """The controller's IK as it was before the single-SVD solve (as of e39229f): damped
     step by ``numpy.linalg.solve`` on ``J Jᵀ + λ² I``, nullspace by ``numpy.linalg.pinv``.
-    Kept verbatim but for ``self`` -> ``self.c`` (the model, limits and gains of ``c``)."""
+    Kept verbatim but for ``self`` -> ``self.c`` (the model, limits and gains of ``c``) and
+    the bearing and yaw signs of ``c``'s base frame (``atan2(y, x)`` and +1 at the origin)."""
 
     def __init__(self, c: CartesianController) -> None:
         self.c = c
@@ -159,7 +165,7 @@ class _Reference:
         dq = J.T @ np.linalg.solve(JJt, e)
         N = np.eye(len(q)) - np.linalg.pinv(J, rcond=1e-4) @ J
         posture = c.home - q
-        posture[0] = wrap(math.atan2(target[1], target[0]) - q[0])
+        posture[0] = wrap(c.frame.bearing(*target[:3]) - q[0])
         if self._q_last_goal is not None:
             posture[-1] = self._q_last_goal - q[-1]
         return dq + N @ (c.nullspace_gain * posture)
@@ -170,13 +176,14 @@ class _Reference:
         R = c.data.site_xmat[c.site_id].reshape(3, 3)
         yaw = math.atan2(R[1, 0], R[0, 0])
         d = wrap(target[3] - yaw)
-        q1 = math.atan2(target[1], target[0])
-        base = wrap(q1 + c._yaw_offset - target[3])
+        f = c.frame
+        q1 = f.bearing(*target[:3])
+        base = wrap(f.roll * (f.turn * q1 + f.yaw_offset - target[3]))
         branches = [base + k * 2 * math.pi for k in (-1, 0, 1)]
         inside = [b for b in branches if c.lo[-1] + 0.05 < b < c.hi[-1] - 0.05]
         q_last = min(inside or branches, key=lambda b: abs(b - q[-1]))
         self._q_last_goal = float(np.clip(q_last, c.lo[-1], c.hi[-1]))
-        planned = (q1 - q_last) - (q[0] - q[-1])
+        planned = (f.turn * q1 - f.roll * q_last) - (f.turn * q[0] - f.roll * q[-1])
         d += 2 * math.pi * round((planned - d) / (2 * math.pi))
         sub = np.array(target, dtype=float)
         sub[3] = yaw + float(np.clip(d, -0.5, 0.5))
@@ -204,7 +211,7 @@ class _Reference:
         c = self.c
         target = np.asarray(target, dtype=float)
         q = c.home.copy()
-        q[0] = np.clip(math.atan2(target[1], target[0]), c.lo[0], c.hi[0])
+        q[0] = np.clip(c.frame.bearing(*target[:3]), c.lo[0], c.hi[0])
         for _ in range(300):
             e = self.error(q, target)
             if np.linalg.norm(e[:3]) < tol_pos and np.linalg.norm(e[3:]) < tol_rot:
@@ -307,6 +314,131 @@ def test_control_ticks_and_full_ik_agree_with_the_pinv_reference(name: str) -> N
     assert any(verdicts)
 
 
+# --- the control tick on Python floats against its array form ------------------------------
+
+
+class _ArrayForm:
+    """A control tick as array formulas, the controller's own before its hot path moved to
+    Python floats and views (as of 01c76bd); kept verbatim but for ``self`` -> ``self.c``
+    and the bearing and yaw signs of ``c``'s base frame (``atan2(y, x)`` and +1 at the origin).
+    The controller promises the same operations in the same order: the same bits."""
+
+    def __init__(self, c: CartesianController) -> None:
+        self.c = c
+        self.q = c.home.copy()
+        self.goal: float | None = None  # the last joint's branch
+        self.locked = 0  # ticks that locked a joint at a limit
+
+    def update(self, target: np.ndarray) -> np.ndarray:
+        c, q, budget = self.c, self.q, self.c.max_step
+        for i in range(c.iterations):
+            c._set(q)
+            sub = self.yaw_subgoal(q, target)
+            e = self.error(sub)
+            if i and e[:3] @ e[:3] < TRACKED[0] ** 2 and e[3:] @ e[3:] < TRACKED[1] ** 2:
+                break
+            q_new = self.ik_step(q, sub, budget, e)
+            budget -= float(np.abs(q_new - q).max())
+            q = q_new
+            if budget <= 1e-9:
+                break
+        self.q = q
+        return q
+
+    def error(self, target: np.ndarray) -> np.ndarray:
+        c = self.c
+        e = np.zeros(6)
+        np.subtract(target[:3], c.data.site_xpos[c.site_id], out=e[:3])
+        co, s = math.cos(target[3]), math.sin(target[3])
+        R_target = np.array([[co, s, 0.0], [s, -co, 0.0], [0.0, 0.0, -1.0]])
+        R_err, quat = np.zeros((3, 3)), np.zeros(4)
+        mujoco.mju_mulMatMatT(R_err, R_target, c.data.site_xmat[c.site_id].reshape(3, 3))
+        mujoco.mju_mat2Quat(quat, R_err.ravel())
+        mujoco.mju_quat2Vel(e[3:], quat, 1.0)
+        return e
+
+    def yaw_subgoal(self, q: np.ndarray, target: np.ndarray) -> np.ndarray:
+        c = self.c
+        yaw = yaw_of(c.data.site_xmat[c.site_id])
+        x, y, _, target_yaw = target.tolist()
+        q_first, q_last_now = q[0].item(), q[-1].item()
+        d = wrap(target_yaw - yaw)
+        f = c.frame
+        q1 = f.bearing(x, y, target[2])
+        base = wrap(f.roll * (f.turn * q1 + f.yaw_offset - target_yaw))
+        branches = [base + k * 2 * math.pi for k in (-1, 0, 1)]
+        lo, hi = float(c.lo[-1]), float(c.hi[-1])
+        inside = [b for b in branches if lo + WRIST_MARGIN < b < hi - WRIST_MARGIN]
+        q_last = min(inside or branches, key=lambda b: abs(b - q_last_now))
+        self.goal = min(max(q_last, lo), hi)
+        planned = (f.turn * q1 - f.roll * q_last) - (f.turn * q_first - f.roll * q_last_now)
+        d += 2 * math.pi * round((planned - d) / (2 * math.pi))
+        sub = np.array(target, dtype=float)
+        sub[3] = yaw + min(max(d, -0.5), 0.5)
+        return sub
+
+    def ik_step(
+        self, q: np.ndarray, target: np.ndarray, max_step: float, e: np.ndarray
+    ) -> np.ndarray:
+        c = self.c
+        jac = np.zeros((6, c.model.nv))
+        mujoco.mj_jacSite(c.model, c.data, jac[:3], jac[3:], c.site_id)
+        J = jac[:, c.dofadr]
+        posture = c.home - q
+        posture[0] = wrap(c.frame.bearing(*target[:3].tolist()) - q[0])
+        if self.goal is not None:
+            posture[-1] = self.goal - q[-1]
+        pull = c.nullspace_gain * posture
+        dq = self.step(J, e, pull)
+        at_lo, at_hi = q <= c.lo + 1e-9, q >= c.hi - 1e-9
+        if (at_lo | at_hi).any():
+            self.locked += 1
+            free = np.ones(len(q), dtype=bool)
+            for _ in range(2):
+                pushed = (at_lo & (dq < 0)) | (at_hi & (dq > 0))
+                if not (pushed & free).any():
+                    break
+                free &= ~pushed
+                dq = self.step(J * free, e, pull) * free
+        biggest = max(dq.max(), -dq.min())
+        if biggest > max_step:
+            dq *= max_step / biggest
+        dq += q
+        return dq.clip(c.lo, c.hi, out=dq)
+
+    def step(self, J: np.ndarray, e: np.ndarray, pull: np.ndarray) -> np.ndarray:
+        u, s, vt = _svd(J)
+        c = s / (s * s + self.c.damping**2) * (e @ u)
+        c -= (vt @ pull) * (s > 1e-4 * s[0])
+        return pull + c @ vt
+
+
+@pytest.mark.parametrize("name", [*SCENES, "loco_manip"])
+def test_control_ticks_are_bit_identical_to_the_array_form(name: str) -> None:
+    """1200 control ticks, the target jumping every 60, the arm restarted every 300 from
+    random postures with joints on their limits (the locking path runs): every joint
+    target has the bits of the array form's."""
+    scene = load_scene(name)
+    model = scene.model()
+    ctl = CartesianController(model, scene.robot)
+    ref = _ArrayForm(CartesianController(model, scene.robot))
+    rng = np.random.default_rng(5)
+    target = _work_target(rng)
+    for tick in range(1200):
+        if tick % 300 == 150:
+            q = rng.uniform(ctl.lo, ctl.hi)
+            q[::3] = np.where(rng.random(len(q)) < 0.5, ctl.lo, ctl.hi)[::3]
+            ctl.reset(q)
+            ref.q, ref.goal = q.copy(), None
+        if tick % 60 == 0:
+            target = _work_target(rng)
+        new, old = ctl.update(target), ref.update(target)
+        assert np.array_equal(new, old), (tick, new - old)
+        if tick % 97 == 0:  # another method moves the controller's kinematics meanwhile
+            ctl.forward(rng.uniform(ctl.lo, ctl.hi))
+    assert ref.locked > 20, ref.locked
+
+
 def _last_joint(sim: Sim) -> int:
     return list(sim.joint_state().names).index(sim.robot.arm_joints[-1])
 
@@ -372,3 +504,98 @@ def test_a_goal_yaw_past_the_wrist_limit_is_taken_by_its_equivalent(
             sim.close()
     assert travel["chosen"] < math.pi
     assert travel["nearest"] > 1.5 * math.pi, travel
+
+
+# --- the controller in the arm's own base frame ------------------------------------------------
+
+
+def _arm(
+    name: str,
+    turn: float = 0.0,
+    shift: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    flip: str = "",
+) -> tuple[mujoco.MjModel, Robot]:
+    """The built-in robot ``name`` alone, its root body turned by ``turn`` [rad] about z and
+    moved by ``shift`` [m]; ``flip`` ("first", "last" or "") names an arm joint whose axis
+    is reversed, its range and home angle mirrored (the same arm, its joint counted the
+    other way round)."""
+    robot = load_robot(name)
+    spec = mujoco.MjSpec.from_file(str(robot.mjcf_path))
+    root = spec.worldbody.first_body()
+    root.pos = shift
+    root.quat = [math.cos(turn / 2), 0.0, 0.0, math.sin(turn / 2)]
+    home = list(robot.home)
+    if flip:
+        i = 0 if flip == "first" else len(home) - 1
+        joint = spec.joint(robot.arm_joints[i])
+        joint.axis = -joint.axis
+        joint.range = [-joint.range[1], -joint.range[0]]
+        home[i] = -home[i]
+    return spec.compile(), dataclasses.replace(robot, home=tuple(home))
+
+
+def _reach(ctl: CartesianController, target: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Joint targets after 300 control ticks towards ``target`` from home, and the POI's
+    position [m] and yaw [rad] errors there."""
+    ctl.reset(ctl.home)
+    for _ in range(300):
+        ctl.update(target)
+    poi = ctl.forward(ctl.q)
+    return ctl.q.copy(), float(np.linalg.norm(poi[:3] - target[:3])), abs(wrap(poi[3] - target[3]))
+
+
+@pytest.mark.parametrize("name", ["arm", "panda"])
+@pytest.mark.parametrize(
+    ("turn", "shift", "flip"),
+    [
+        (math.pi, (0.3, -0.2, 0.05), ""),  # a vendor's base, turned half a turn and moved
+        (0.7, (-0.1, 0.4, 0.0), ""),
+        (0.0, (0.0, 0.0, 0.0), "last"),  # the wrist roll's axis into the flange
+        (math.pi, (0.3, -0.2, 0.05), "first"),  # the base joint's axis downwards
+    ],
+)
+def test_an_arm_moved_turned_or_with_an_axis_reversed_tracks_as_the_original(
+    name: str, turn: float, shift: tuple[float, float, float], flip: str
+) -> None:
+    """Targets of the work area (any yaw), moved with the arm's root: the same joint
+    targets tick by tick, up to rounding (the reversed joint's negated), and the same
+    accuracy as the arm at the origin."""
+    model, robot = _arm(name)
+    moved_model, moved_robot = _arm(name, turn, shift, flip)
+    ctl, moved = CartesianController(model, robot), CartesianController(moved_model, moved_robot)
+    sign = np.ones(len(robot.home))
+    if flip:
+        sign[0 if flip == "first" else -1] = -1.0
+    c, s = math.cos(turn), math.sin(turn)
+    rng = np.random.default_rng(6)
+    for _ in range(6):
+        target = _work_target(rng)
+        x, y, z, yaw = target
+        moved_target = np.array(
+            [c * x - s * y + shift[0], s * x + c * y + shift[1], z + shift[2], wrap(yaw + turn)]
+        )
+        q, pos, rot = _reach(ctl, target)
+        moved_q, moved_pos, moved_rot = _reach(moved, moved_target)
+        assert pos < 1e-3 and rot < math.radians(0.5), (target, pos, rot)
+        assert moved_pos < 1e-3 and moved_rot < math.radians(0.5), (
+            moved_target,
+            moved_pos,
+            moved_rot,
+        )
+        np.testing.assert_allclose(moved_q, sign * q, atol=1e-6)
+
+
+@pytest.mark.parametrize("name", ["arm", "panda"])
+def test_the_base_frame_of_an_arm_at_the_origin_is_the_world(name: str) -> None:
+    """The built-in arms stand at the origin facing +x, both axes the promised way: the
+    bearing is ``atan2(y, x)`` to the bit (their joint targets keep their bits)."""
+    model, robot = _arm(name)
+    frame = CartesianController(model, robot).frame
+    assert (frame.heading, frame.turn, frame.roll) == (0.0, 1.0, 1.0)
+    rng = np.random.default_rng(7)
+    for x, y, z, _ in (_work_target(rng) * [1, 1, 3, 1] for _ in range(200)):
+        assert frame.bearing(x, y, z) == math.atan2(y, x)
+    moved = CartesianController(*_arm(name, math.pi, (0.3, -0.2, 0.05), "last")).frame
+    assert (moved.turn, moved.roll) == (1.0, -1.0)
+    assert abs(abs(moved.heading) - math.pi) < 1e-9
+    np.testing.assert_allclose(moved.anchor[:2], [0.3, -0.2], atol=1e-12)
