@@ -195,15 +195,21 @@ BROKEN_ROBOTS = {
 }
 BROKEN_MJCF = {
     # case: (old, new in robot.xml, what the one line names)
+    "pan-tilted": (
+        '<joint name="shoulder_pan" type="hinge" axis="0 0 1"',
+        '<joint name="shoulder_pan" type="hinge" axis="0.6 0 0.8"',
+        ["arm.joints (line 6)", "'shoulder_pan' turns about [0.60, 0.00, 0.80]", "vertical"],
+    ),
+}
+TURNED_MJCF = {
+    # case: (old, new in robot.xml): axes the controller reads the signs of (base_frame.py)
     "roll-flipped": (
         '<joint name="wrist_rotate" type="hinge" axis="0 0 1"',
         '<joint name="wrist_rotate" type="hinge" axis="0 0 -1"',
-        ["arm.joints (line 6)", "'wrist_rotate' rolls the gripper the other way", "flip"],
     ),
     "pan-upside-down": (
         '<joint name="shoulder_pan" type="hinge" axis="0 0 1"',
         '<joint name="shoulder_pan" type="hinge" axis="0 0 -1"',
-        ["arm.joints (line 6)", "'shoulder_pan' turns about [0.00, 0.00, -1.00]", "flip"],
     ),
 }
 
@@ -238,8 +244,8 @@ def test_broken_robot_file_gets_one_line(tmp_path: Path, case: str) -> None:
 def test_robot_whose_axes_break_the_controllers_assumptions_gets_one_line(
     tmp_path: Path, case: str
 ) -> None:
-    """A wrist roll of the other sign or an upside-down pan: `smc robots` says what to fix
-    (before, both passed and every target later read "out of the robot's reach")."""
+    """A pan that does not turn about the vertical: `smc robots` says what to fix (before,
+    it passed and every target later read "out of the robot's reach")."""
     old, new, parts = BROKEN_MJCF[case]
     _broken_copy(tmp_path, "geom_group: 3", "geom_group: 3")
     xml = tmp_path / "robots" / "six" / "robot.xml"
@@ -251,6 +257,27 @@ def test_robot_whose_axes_break_the_controllers_assumptions_gets_one_line(
     assert proc.returncode == 2 and len(lines) == 1, proc.stderr
     assert lines[0].startswith(f"error: {robot_file}: "), lines[0]
     assert all(p in lines[0] for p in parts), lines[0]
+
+
+@pytest.mark.parametrize("case", sorted(TURNED_MJCF))
+def test_axes_of_either_sign_are_the_controllers_to_read(tmp_path: Path, case: str) -> None:
+    """A wrist roll of the other sign or an upside-down pan (both refused until the
+    controller read the signs from the joint axes, :mod:`smccli.world.base_frame`): the
+    robot passes its checks and reaches a target of its scene."""
+    import numpy as np
+
+    from smccli.world.controller import reach_problem
+
+    old, new = TURNED_MJCF[case]
+    _broken_copy(tmp_path, "geom_group: 3", "geom_group: 3")
+    xml = tmp_path / "robots" / "six" / "robot.xml"
+    xml.write_text(xml.read_text().replace(old, new, 1))
+    robot_file = tmp_path / "robots" / "six" / "robot.yaml"
+    proc = smc("robots", robot_file)
+    assert proc.returncode == 0, proc.stderr
+    robot = load_robot(robot_file)
+    model = mujoco.MjModel.from_xml_path(str(robot.mjcf_path))
+    assert reach_problem(model, robot, np.array([0.45, 0.1, 0.05, 0.4])) is None
 
 
 def test_unreachable_target_says_what_fails() -> None:

