@@ -48,7 +48,12 @@ from smccli.perception import (  # noqa: E402
     hsv_histogram,
     salient_cluster,
 )
-from smccli.perception.cloud import object_points  # noqa: E402
+from smccli.perception.cloud import (  # noqa: E402
+    crop_mask,
+    crop_region,
+    object_points,
+    points_from_depth,
+)
 from smccli.perception.clusters import describe_cluster  # noqa: E402
 from smccli.perception.segment import cut_points  # noqa: E402
 from smccli.schemas import parse_yaml, schema_problem  # noqa: E402
@@ -108,6 +113,37 @@ def test_frame_without_valid_depth_gives_no_clusters():
     )
     assert clusters_from_frame(frame, None, _SCENE_PARAMS) == ()
     assert len(cloud_from_frame(frame, None, _SCENE_PARAMS)[0]) == 0
+
+
+@pytest.mark.parametrize(
+    "lo, hi, base",
+    [
+        ((0.4, -0.15, 0.6), (0.7, 0.15, 1.4), None),  # a look's box: narrow, tall
+        ((0.45, -0.1, 0.7), (0.6, 0.05, 0.9), None),  # a small box below the camera
+        ((-3.0, -3.0, -1.0), (3.0, 3.0, 3.0), None),  # the camera inside it
+        ((0.4, -0.1, TABLE_TOP - 0.002), (0.6, 0.1, TABLE_TOP + 0.002), None),  # table edge to edge
+        ((-0.15, -0.15, 0.6), (0.15, 0.15, 1.4), np.array([0.55, 0.0, 0.4])),
+        ((5.0, 5.0, 0.0), (6.0, 6.0, 1.0), None),  # out of sight
+    ],
+)
+def test_crop_region_lifts_exactly_the_points_the_whole_image_does(scene, rng, lo, hi, base):
+    scene.clear()
+    for name, pose in random_layout(rng, [s.name for s in OBJECTS[:4]]).items():
+        scene.place(name, *pose)
+    frame = scene.render()
+    params = dataclasses.replace(
+        _SCENE_PARAMS, crop_min=lo, crop_max=hi, crop_frame="world" if base is None else "base"
+    )
+    whole, whole_colors = points_from_depth(frame, params.max_depth)
+    keep = crop_mask(whole, params, base)
+    region = crop_region(frame, params, base)
+    points, colors = points_from_depth(frame, params.max_depth, region)
+    inside = crop_mask(points, params, base)
+    assert np.array_equal(points[inside], whole[keep])
+    assert np.array_equal(colors[inside], whole_colors[keep])
+    if region is not None:  # a narrow box lifts a part of the image only
+        v0, v1, u0, u1 = region
+        assert (v1 - v0) * (u1 - u0) < frame.depth.size
 
 
 # --- clusters: count, pose, extents --------------------------------------------------------

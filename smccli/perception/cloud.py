@@ -9,29 +9,118 @@ from smccli.perception.params import PerceptionParams
 from smccli.world.sensors import CameraFrame, RobotGeometry
 
 
-def points_from_depth(frame: CameraFrame, max_depth: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
+def _rays(K: np.ndarray, h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised image coordinates ``(x_n, y_n)`` of every pixel of an ``h`` x ``w``
+    image with intrinsics ``K``, each (h * w,) float64 in row-major order: the pinhole
+    back-projection's per-pixel part, computed once per camera (the skew ``K[0, 1]`` kept
+    for generality)."""
+    key = (K.tobytes(), h, w)
+    rays = _RAYS.get(key)
+    if rays is None:
+        v, u = np.divmod(np.arange(h * w), w)
+        y_n = (v - K[1, 2]) / K[1, 1]
+        x_n = (u - K[0, 2] - K[0, 1] * y_n) / K[0, 0]
+        if len(_RAYS) >= 8:  # a few cameras per process; never grows without bound
+            _RAYS.clear()
+        rays = _RAYS[key] = (x_n, y_n)
+    return rays
+
+
+_RAYS: dict[tuple[bytes, int, int], tuple[np.ndarray, np.ndarray]] = {}
+
+
+def points_from_depth(
+    frame: CameraFrame,
+    max_depth: float = 5.0,
+    region: tuple[int, int, int, int] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Lift every valid depth pixel into the world frame.
 
     Returns points, shape (n, 3) [m] in the world frame, and their colours, shape (n, 3)
-    uint8 RGB. Invalid pixels (0, inf, nan, beyond ``max_depth``) are dropped.
+    uint8 RGB, in the image's row-major order. Invalid pixels (0, inf, nan, beyond
+    ``max_depth``) are dropped; with ``region`` ``(v0, v1, u0, u1)`` so are the pixels
+    outside rows ``v0:v1`` and columns ``u0:u1`` (:func:`crop_region`).
     """
     depth = np.asarray(frame.depth, dtype=np.float32)
     h, w = depth.shape
     K = np.asarray(frame.K, dtype=np.float64)
-    valid = np.isfinite(depth) & (depth > 0) & (depth < max_depth)
-    v, u = np.nonzero(valid)
-    z = depth[v, u].astype(np.float64)
-    # Pinhole back-projection in the optical frame (x right, y down, z forward); the skew
-    # term K[0, 1] is kept for generality.
-    y_n = (v - K[1, 2]) / K[1, 1]
-    x_n = (u - K[0, 2] - K[0, 1] * y_n) / K[0, 0]
-    p_cam = np.stack([x_n * z, y_n * z, z], axis=1)
+    if region is None:
+        valid = np.isfinite(depth) & (depth > 0) & (depth < max_depth)
+    else:
+        v0, v1, u0, u1 = region
+        sub = depth[v0:v1, u0:u1]
+        valid = np.zeros((h, w), dtype=bool)
+        valid[v0:v1, u0:u1] = np.isfinite(sub) & (sub > 0) & (sub < max_depth)
+    idx = np.flatnonzero(valid)
+    z = np.take(depth.reshape(-1), idx).astype(np.float64)
+    x_n, y_n = _rays(K, h, w)
+    # Pinhole back-projection in the optical frame (x right, y down, z forward), then
+    # rotated column by column: the same sums, in the same order, as
+    # ``einsum("ij,nj->ni", R, p)`` (bit-identical points) at a fifth of its time.
+    px, py = np.take(x_n, idx) * z, np.take(y_n, idx) * z
     T = np.asarray(frame.T_world_camera, dtype=np.float64)
-    # einsum rather than ``p_cam @ R.T``: a threaded BLAS call is ten times slower on a
-    # busy machine; einsum stays single-threaded.
-    points = np.einsum("ij,nj->ni", T[:3, :3], p_cam) + T[:3, 3]
-    colors = np.asarray(frame.rgb)[v, u]
+    points = np.empty((len(idx), 3))
+    for i in range(3):
+        points[:, i] = T[i, 0] * px + T[i, 1] * py + T[i, 2] * z + T[i, 3]
+    colors = np.take(np.asarray(frame.rgb).reshape(-1, 3), idx, axis=0)
     return points, colors
+
+
+def crop_region(
+    frame: CameraFrame, params: PerceptionParams, base: np.ndarray | None = None
+) -> tuple[int, int, int, int] | None:
+    """The image rows and columns ``(v0, v1, u0, u1)`` outside which no pixel lifts into
+    the crop box (:func:`crop_mask`), or None for the whole image.
+
+    A lifted point lies in the box and, in the optical frame, at a depth between the
+    frame's nearest reading and ``max_depth``: in a convex polytope (the box cut by that
+    slab) whose image, all of it in front of the camera, is the convex hull of its
+    vertices' images. Their bounding rectangle, widened by two pixels for rounding, holds
+    every pixel whose point is in the box: the same points as the whole image gives.
+    """
+    depth = np.asarray(frame.depth, dtype=np.float32)
+    h, w = depth.shape[:2]
+    seen = depth[np.isfinite(depth) & (depth > 0)]
+    if not len(seen):
+        return None
+    near, far = float(seen.min()), params.max_depth
+    lo, hi = params.crop_min, params.crop_max
+    corners = np.array(
+        [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+    )
+    if params.crop_frame == "base":
+        if base is None:
+            raise ValueError("perception.crop_frame=base needs the base's pose")
+        c, s = np.cos(base[2]), np.sin(base[2])
+        bx, by = corners[:, 0].copy(), corners[:, 1].copy()
+        corners[:, 0] = base[0] + c * bx - s * by
+        corners[:, 1] = base[1] + s * bx + c * by
+    T = np.asarray(frame.T_world_camera, dtype=np.float64)
+    p = np.einsum("ji,nj->ni", T[:3, :3], corners - T[:3, 3])  # R^T (x - t)
+    # The cut polytope's vertices: the corners inside the slab, and where the box's edges
+    # (corners differing in one coordinate: one bit of their index) cross its two faces.
+    verts = [p[(p[:, 2] >= near) & (p[:, 2] <= far)]]
+    for a in range(8):
+        for bit in (1, 2, 4):
+            b = a | bit
+            if b == a:
+                continue
+            za, zb = p[a, 2], p[b, 2]
+            for level in (near, far):
+                if (za - level) * (zb - level) < 0:
+                    verts.append((p[a] + (level - za) / (zb - za) * (p[b] - p[a]))[None])
+    q = np.concatenate(verts)
+    if not len(q):
+        return (0, 0, 0, 0)  # the box is out of sight
+    K = np.asarray(frame.K, dtype=np.float64)
+    x_n, y_n = q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]
+    u = K[0, 0] * x_n + K[0, 1] * y_n + K[0, 2]
+    v = K[1, 1] * y_n + K[1, 2]
+    v0, v1 = min(max(int(np.floor(v.min())) - 2, 0), h), min(max(int(np.ceil(v.max())) + 3, 0), h)
+    u0, u1 = min(max(int(np.floor(u.min())) - 2, 0), w), min(max(int(np.ceil(u.max())) + 3, 0), w)
+    if (v0, v1, u0, u1) == (0, h, 0, w):
+        return None
+    return (v0, max(v1, v0), u0, max(u1, u0))
 
 
 def in_crop_frame(
@@ -54,10 +143,13 @@ def crop_mask(
 ) -> np.ndarray:
     """Points inside the axis-aligned workspace box, boolean mask of shape (n,); the box
     is in the frame :func:`in_crop_frame` says."""
-    lo = np.asarray(params.crop_min)
-    hi = np.asarray(params.crop_max)
+    lo, hi = params.crop_min, params.crop_max
     points = in_crop_frame(points, params, base)
-    return np.all((points >= lo) & (points <= hi), axis=1)
+    # Column by column: the (n, 3) comparisons and their ``all`` took 8 times as long.
+    keep = (points[:, 0] >= lo[0]) & (points[:, 0] <= hi[0])
+    for k in (1, 2):
+        keep &= (points[:, k] >= lo[k]) & (points[:, k] <= hi[k])
+    return keep
 
 
 def crop_faces(points: np.ndarray, lo: np.ndarray, hi: np.ndarray, touch: float) -> list[str]:
@@ -248,7 +340,7 @@ def object_points_on_planes(
     one), or with ``remove_walls`` each near-horizontal plane removed; and the table's own
     points (m, 3) [m] and colours (m, 3) uint8, the reference of
     :mod:`smccli.perception.brightness` (none with ``remove_walls``: shelves differ)."""
-    points, colors = points_from_depth(frame, params.max_depth)
+    points, colors = points_from_depth(frame, params.max_depth, crop_region(frame, params, base))
     keep = crop_mask(points, params, base)
     points, colors = points[keep], colors[keep]
     points, colors = voxel_downsample(points, colors, params.voxel_size)
@@ -290,7 +382,8 @@ def cloud_from_frame(
     ``base`` as in :func:`object_points`.
     """
     params = params or PerceptionParams()
-    points, colors = points_from_depth(frame, params.max_depth)
+    region = crop_region(frame, params, base) if crop else None
+    points, colors = points_from_depth(frame, params.max_depth, region)
     if crop:
         keep = crop_mask(points, params, base)
         points, colors = points[keep], colors[keep]
