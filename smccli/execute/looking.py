@@ -17,9 +17,11 @@ from dataclasses import replace
 import numpy as np
 
 from smccli.errors import SmcError
+from smccli.execute.sensing import Sensors
 from smccli.learn.dmp import min_jerk
 from smccli.learn.params import SmcParams
-from smccli.perception import Cluster, PerceptionParams, d_cluster
+from smccli.perception import Cluster, PerceptionParams, clusters_from_frame, d_cluster
+from smccli.perception.cloud import view_region
 from smccli.perception.distance import d_extents
 
 LOOK_PERIOD = 1.0
@@ -63,14 +65,27 @@ def check_look_period(look_period: float) -> None:
 
 def look_crop(seen: Cluster, params: PerceptionParams) -> PerceptionParams:
     """The perception settings of a look at ``seen``: the crop box narrowed to the table
-    around it, :data:`LOOK_RADIUS` plus :data:`LOOK_MARGIN` beyond its footprint (its z
-    range unchanged): a quarter of the whole box's time, the table still dominating it for
-    the plane fit."""
+    around it, :data:`LOOK_RADIUS` plus :data:`LOOK_MARGIN` beyond its footprint and
+    :data:`LOOK_MARGIN` above its top (what stands higher is the hand over it, or out of
+    reach of a push): a small part of the image, the table still dominating it for the
+    plane fit."""
     half = float(np.max(seen.extents[:2])) / 2 + LOOK_RADIUS + LOOK_MARGIN
     lo, hi = np.asarray(params.crop_min, float), np.asarray(params.crop_max, float)
     lo[:2] = np.maximum(lo[:2], seen.centroid[:2] - half)
     hi[:2] = np.minimum(hi[:2], seen.centroid[:2] + half)
+    top = float(seen.centroid[2] + seen.extents[2] / 2) + LOOK_MARGIN
+    hi[2] = max(min(hi[2], top), lo[2])
     return replace(params, crop_min=tuple(lo.tolist()), crop_max=tuple(hi.tolist()))
+
+
+def look(sensors: Sensors, seen: Cluster, params: PerceptionParams) -> tuple[Cluster, ...]:
+    """The clusters of a look at ``seen``: a frame of the part of the image that can see
+    into :func:`look_crop`'s box (:func:`~smccli.perception.cloud.view_region`), the rest
+    left unread, perceived through that box (:func:`clusters_from_frame`)."""
+    crop = look_crop(seen, params)
+    K, T, shape, near = sensors.camera_view()
+    frame = sensors.render_camera(view_region(K, T, shape, near, crop))
+    return clusters_from_frame(frame, sensors.robot_geometry(), crop)
 
 
 def find_again(
