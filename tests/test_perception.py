@@ -51,6 +51,7 @@ from smccli.perception import (  # noqa: E402
 from smccli.perception.cloud import (  # noqa: E402
     crop_mask,
     crop_region,
+    fit_table_plane,
     object_points,
     points_from_depth,
 )
@@ -144,6 +145,28 @@ def test_crop_region_lifts_exactly_the_points_the_whole_image_does(scene, rng, l
     if region is not None:  # a narrow box lifts a part of the image only
         v0, v1, u0, u1 = region
         assert (v1 - v0) * (u1 - u0) < frame.depth.size
+
+
+def test_the_table_plane_from_an_earlier_frame_is_the_one_ransac_finds(scene, rng):
+    """A camera at rest: the refinement started from the last frame's table plane reaches
+    RANSAC's plane to the bit; a start off the table (too few points on it) falls back to
+    RANSAC."""
+    frames = []
+    for _ in range(2):
+        scene.clear()
+        for name, pose in random_layout(rng, [s.name for s in OBJECTS[:3]]).items():
+            scene.place(name, *pose)
+        frames.append(scene.render())
+    clouds = []
+    for frame in frames:
+        points, _ = cloud_from_frame(frame, None, _SCENE_PARAMS)
+        clouds.append(points)
+    first = fit_table_plane(clouds[0], _SCENE_PARAMS)
+    second = fit_table_plane(clouds[1], _SCENE_PARAMS)
+    assert first is not None and second is not None
+    assert np.array_equal(fit_table_plane(clouds[1], _SCENE_PARAMS, first), second)
+    off = first + np.array([0.0, 0.0, 0.0, -0.1])  # 10 cm above the table
+    assert np.array_equal(fit_table_plane(clouds[1], _SCENE_PARAMS, off), second)
 
 
 # --- clusters: count, pose, extents --------------------------------------------------------

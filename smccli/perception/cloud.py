@@ -232,25 +232,47 @@ def _ransac_plane(points: np.ndarray, params: PerceptionParams) -> tuple[np.ndar
     return plane / np.linalg.norm(plane[:3]), len(inliers)
 
 
-def fit_table_plane(points: np.ndarray, params: PerceptionParams) -> np.ndarray | None:
+def fit_table_plane(
+    points: np.ndarray, params: PerceptionParams, start: np.ndarray | None = None
+) -> np.ndarray | None:
     """Fit the table plane with RANSAC (open3d ``segment_plane``), refined by least squares.
 
     Returns ``[a, b, c, d]`` with ``a x + b y + c z + d = 0``, unit normal pointing up
-    (+z), or None if no near-horizontal plane with enough support is found.
+    (+z), or None if no near-horizontal plane with enough support is found. ``start``: the
+    table plane of an earlier frame from the same camera pose; when at least half the
+    points lie on it and the refinement from it reaches a fixed point, that is the plane,
+    without RANSAC (the refinement reaches the same fixed point from RANSAC's hypothesis:
+    bit-identical on every frame of the sample trees and campaigns).
     """
     if len(points) < 3:
         return None
+    if start is not None:
+        mask = np.abs(plane_distance(points, start)) < params.plane_distance
+        if 2 * np.count_nonzero(mask) >= len(points):
+            plane, fixed = _refine_plane(points, mask, params)
+            if fixed:
+                return plane
     plane, n_inliers = _ransac_plane(points, params)
     if plane[2] < 0:
         plane = -plane
     if np.arccos(np.clip(plane[2], -1.0, 1.0)) > params.plane_max_tilt or n_inliers < 3:
         return None  # the biggest plane is a wall or an object face: no table in view
-    # Least-squares refinement on the inliers, iterated to a fixed point: the plane through
-    # their mean, normal = direction of least variance. open3d's RANSAC runs on several
-    # threads and, on a busy machine, need not return the same hypothesis twice; the
-    # refined inlier set converges to the same set of table points from any nearby
-    # hypothesis, so the same frame always gives bit-identical planes (and trees).
     mask = np.abs(plane_distance(points, plane)) < params.plane_distance
+    return _refine_plane(points, mask, params)[0]
+
+
+def _refine_plane(
+    points: np.ndarray, mask: np.ndarray, params: PerceptionParams
+) -> tuple[np.ndarray, bool]:
+    """Least-squares refinement of the plane through ``points[mask]`` (n, 3), iterated to a
+    fixed point (at most 10 times): the plane and whether it was reached.
+
+    The plane through the inliers' mean, normal = direction of least variance. open3d's
+    RANSAC runs on several threads and, on a busy machine, need not return the same
+    hypothesis twice; the refined inlier set converges to the same set of table points
+    from any nearby hypothesis, so the same frame always gives bit-identical planes (and
+    trees).
+    """
     for _ in range(10):
         inl = np.compress(mask, points, axis=0)
         mean = inl.mean(axis=0)
@@ -260,9 +282,14 @@ def fit_table_plane(points: np.ndarray, params: PerceptionParams) -> np.ndarray 
         plane = np.r_[normal, -float(np.dot(normal, mean))]
         new_mask = np.abs(plane_distance(points, plane)) < params.plane_distance
         if np.array_equal(new_mask, mask):
-            break
+            return plane, True
         mask = new_mask
-    return plane
+    return plane, False
+
+
+_TABLES: dict[bytes, np.ndarray] = {}
+"""The last table plane seen from each camera pose (T_world_camera's bytes): where the
+next frame's refinement starts (:func:`fit_table_plane`)."""
 
 
 def plane_distance(points: np.ndarray, plane: np.ndarray) -> np.ndarray:
@@ -371,7 +398,12 @@ def object_points_on_planes(
     if params.remove_walls:
         points, colors, planes = remove_planes(points, colors, params)
     else:
-        plane = fit_table_plane(points, params)
+        pose = np.asarray(frame.T_world_camera, dtype=np.float64).tobytes()
+        plane = fit_table_plane(points, params, _TABLES.get(pose))
+        if plane is not None:
+            if len(_TABLES) >= 16:  # a few cameras at rest; one that moves never hits
+                _TABLES.clear()
+            _TABLES[pose] = plane
         planes = [] if plane is None else [plane]
         if plane is not None:
             height = plane_distance(points, plane)
