@@ -133,4 +133,12 @@ def test_a_look_renders_a_small_part_of_the_image_and_sees_what_a_whole_frame_do
         assert np.abs(a.centroid - b.centroid).max() < 1e-4
         assert np.abs(a.extents - b.extents).max() < 1e-4
         assert np.allclose(a.histogram, b.histogram, atol=1e-3)
+    # Nothing moved: the same frame, the same clusters (kept, not perceived again) ...
+    again = look(sensors, seen, params)
+    assert again == looked
+    # ... until something does: a push, seen at once.
+    Truth(sim).push_object("white_box", 0.03, 0.0)
+    pushed = look(sensors, seen, params)
+    box = min(pushed, key=lambda c: np.hypot(*(c.centroid[:2] - seen.centroid[:2])))
+    assert abs(box.centroid[0] - seen.centroid[0] - 0.03) < 0.005
     sim.close()

@@ -23,6 +23,7 @@ from smccli.learn.params import SmcParams
 from smccli.perception import Cluster, PerceptionParams, clusters_from_frame, d_cluster
 from smccli.perception.cloud import view_region
 from smccli.perception.distance import d_extents
+from smccli.world.sensors import CameraFrame, RobotGeometry
 
 LOOK_PERIOD = 1.0
 """While an arm acts on an object, it looks at it again this often [s]; 0 = off. Each look
@@ -81,11 +82,61 @@ def look_crop(seen: Cluster, params: PerceptionParams) -> PerceptionParams:
 def look(sensors: Sensors, seen: Cluster, params: PerceptionParams) -> tuple[Cluster, ...]:
     """The clusters of a look at ``seen``: a frame of the part of the image that can see
     into :func:`look_crop`'s box (:func:`~smccli.perception.cloud.view_region`), the rest
-    left unread, perceived through that box (:func:`clusters_from_frame`)."""
+    left unread, perceived through that box (:func:`clusters_from_frame`).
+
+    When that frame is the last look's to the bit and so are the robot's spheres that reach
+    the box (nothing there moved; the self-filter removes the same points), its clusters
+    are the last look's: perception would give them again from the same input.
+    """
     crop = look_crop(seen, params)
     K, T, shape, near = sensors.camera_view()
     frame = sensors.render_camera(view_region(K, T, shape, near, crop))
-    return clusters_from_frame(frame, sensors.robot_geometry(), crop)
+    geometry = sensors.robot_geometry()
+    arm = _spheres_in(geometry, crop)
+    last = _LAST_LOOK[0] if _LAST_LOOK else None
+    if (
+        last is not None
+        and arm is not None
+        and last[2] is not None
+        and last[0] == crop
+        and np.array_equal(arm, last[2])
+        and _same_frame(last[1], frame)
+    ):
+        return last[3]
+    clusters = clusters_from_frame(frame, geometry, crop)
+    _LAST_LOOK[:] = [(crop, frame, arm, clusters)]
+    return clusters
+
+
+_LAST_LOOK: list[tuple[PerceptionParams, CameraFrame, np.ndarray | None, tuple[Cluster, ...]]] = []
+"""The last look: its settings, frame, the robot's spheres reaching its box and its
+clusters (:func:`look`)."""
+
+
+def _spheres_in(geometry: RobotGeometry, crop: PerceptionParams) -> np.ndarray | None:
+    """The robot's spheres (k, 4: centre [m], radius [m]) whose bounding boxes meet the
+    crop box: the only ones the self-filter can remove a point of the box with; None for a
+    box in the base's frame."""
+    if crop.crop_frame != "world":
+        return None
+    centers = np.asarray(geometry.centers, dtype=float).reshape(-1, 3)
+    radii = np.asarray(geometry.radii, dtype=float).reshape(-1)
+    lo, hi = np.asarray(crop.crop_min), np.asarray(crop.crop_max)
+    meet = np.all((centers + radii[:, None] >= lo) & (centers - radii[:, None] <= hi), axis=1)
+    return np.column_stack([centers[meet], radii[meet]])
+
+
+def _same_frame(a: CameraFrame, b: CameraFrame) -> bool:
+    """Two frames with the same images, intrinsics and pose, to the bit."""
+    return all(
+        np.array_equal(x, y)
+        for x, y in (
+            (a.depth, b.depth),
+            (a.rgb, b.rgb),
+            (a.K, b.K),
+            (a.T_world_camera, b.T_world_camera),
+        )
+    )
 
 
 def find_again(
