@@ -43,6 +43,10 @@ SENSOR_READINGS = {
     "lidar_pose",
     "render_camera",
     "robot_geometry",
+    # the camera's calibration: where a frame's pixels look, before rendering it
+    "camera_matrix",
+    "camera_pose",
+    "camera_near",
     # the command input, the clock and the files the robot was built from
     "step",
     "t",

@@ -96,3 +96,49 @@ def test_look_period_on_the_command_line(sample_trees, tmp_path, monkeypatch, ca
     assert exit_.value.code in (0, None)
     doc = json.loads(report.read_text())
     assert doc["look_period"] == 0 and doc["successes"] == 2
+
+
+def test_a_look_renders_a_small_part_of_the_image_and_sees_what_a_whole_frame_does():
+    """A look (looking.look) reads only the window of the image that sees into its crop
+    box: the clusters there are those of the whole frame seen through the same box, to a
+    micrometre (the window's depths differ from the frame's in the last bits)."""
+    from dataclasses import replace
+
+    from smccli.execute.looking import look, look_crop
+    from smccli.execute.sensing import Sensors
+    from smccli.perception import PerceptionParams, clusters_from_frame
+    from smccli.perception.cloud import view_region
+    from smccli.perception.reach import workspace_box
+    from smccli.world.scene import load_scene
+
+    scene = load_scene("bench_pick")
+    sim = Sim(scene)
+    sensors = Sensors(sim)
+    lo, hi = workspace_box(scene)
+    params = replace(PerceptionParams(), crop_min=lo, crop_max=hi)
+    geometry = sensors.robot_geometry()
+    whole = sensors.render_camera()
+    seen = min(
+        clusters_from_frame(whole, geometry, params),
+        key=lambda c: np.hypot(*(c.centroid[:2] - np.array([0.45, -0.05]))),
+    )
+    crop = look_crop(seen, params)
+    K, T, shape, near = sensors.camera_view()
+    v0, v1, u0, u1 = view_region(K, T, shape, near, crop)
+    assert (v1 - v0) * (u1 - u0) < 0.25 * whole.depth.size
+    looked = look(sensors, seen, params)
+    expected = clusters_from_frame(whole, geometry, crop)
+    assert len(looked) == len(expected) >= 1
+    for a, b in zip(looked, expected, strict=True):
+        assert np.abs(a.centroid - b.centroid).max() < 1e-4
+        assert np.abs(a.extents - b.extents).max() < 1e-4
+        assert np.allclose(a.histogram, b.histogram, atol=1e-3)
+    # Nothing moved: the same frame, the same clusters (kept, not perceived again) ...
+    again = look(sensors, seen, params)
+    assert again == looked
+    # ... until something does: a push, seen at once.
+    Truth(sim).push_object("white_box", 0.03, 0.0)
+    pushed = look(sensors, seen, params)
+    box = min(pushed, key=lambda c: np.hypot(*(c.centroid[:2] - seen.centroid[:2])))
+    assert abs(box.centroid[0] - seen.centroid[0] - 0.03) < 0.005
+    sim.close()

@@ -48,7 +48,13 @@ from smccli.perception import (  # noqa: E402
     hsv_histogram,
     salient_cluster,
 )
-from smccli.perception.cloud import object_points  # noqa: E402
+from smccli.perception.cloud import (  # noqa: E402
+    crop_mask,
+    crop_region,
+    fit_table_plane,
+    object_points,
+    points_from_depth,
+)
 from smccli.perception.clusters import describe_cluster  # noqa: E402
 from smccli.perception.segment import cut_points  # noqa: E402
 from smccli.schemas import parse_yaml, schema_problem  # noqa: E402
@@ -108,6 +114,59 @@ def test_frame_without_valid_depth_gives_no_clusters():
     )
     assert clusters_from_frame(frame, None, _SCENE_PARAMS) == ()
     assert len(cloud_from_frame(frame, None, _SCENE_PARAMS)[0]) == 0
+
+
+@pytest.mark.parametrize(
+    "lo, hi, base",
+    [
+        ((0.4, -0.15, 0.6), (0.7, 0.15, 1.4), None),  # a look's box: narrow, tall
+        ((0.45, -0.1, 0.7), (0.6, 0.05, 0.9), None),  # a small box below the camera
+        ((-3.0, -3.0, -1.0), (3.0, 3.0, 3.0), None),  # the camera inside it
+        ((0.4, -0.1, TABLE_TOP - 0.002), (0.6, 0.1, TABLE_TOP + 0.002), None),  # table edge to edge
+        ((-0.15, -0.15, 0.6), (0.15, 0.15, 1.4), np.array([0.55, 0.0, 0.4])),
+        ((5.0, 5.0, 0.0), (6.0, 6.0, 1.0), None),  # out of sight
+    ],
+)
+def test_crop_region_lifts_exactly_the_points_the_whole_image_does(scene, rng, lo, hi, base):
+    scene.clear()
+    for name, pose in random_layout(rng, [s.name for s in OBJECTS[:4]]).items():
+        scene.place(name, *pose)
+    frame = scene.render()
+    params = dataclasses.replace(
+        _SCENE_PARAMS, crop_min=lo, crop_max=hi, crop_frame="world" if base is None else "base"
+    )
+    whole, whole_colors = points_from_depth(frame, params.max_depth)
+    keep = crop_mask(whole, params, base)
+    region = crop_region(frame, params, base)
+    points, colors = points_from_depth(frame, params.max_depth, region)
+    inside = crop_mask(points, params, base)
+    assert np.array_equal(points[inside], whole[keep])
+    assert np.array_equal(colors[inside], whole_colors[keep])
+    if region is not None:  # a narrow box lifts a part of the image only
+        v0, v1, u0, u1 = region
+        assert (v1 - v0) * (u1 - u0) < frame.depth.size
+
+
+def test_the_table_plane_from_an_earlier_frame_is_the_one_ransac_finds(scene, rng):
+    """A camera at rest: the refinement started from the last frame's table plane reaches
+    RANSAC's plane to the bit; a start off the table (too few points on it) falls back to
+    RANSAC."""
+    frames = []
+    for _ in range(2):
+        scene.clear()
+        for name, pose in random_layout(rng, [s.name for s in OBJECTS[:3]]).items():
+            scene.place(name, *pose)
+        frames.append(scene.render())
+    clouds = []
+    for frame in frames:
+        points, _ = cloud_from_frame(frame, None, _SCENE_PARAMS)
+        clouds.append(points)
+    first = fit_table_plane(clouds[0], _SCENE_PARAMS)
+    second = fit_table_plane(clouds[1], _SCENE_PARAMS)
+    assert first is not None and second is not None
+    assert np.array_equal(fit_table_plane(clouds[1], _SCENE_PARAMS, first), second)
+    off = first + np.array([0.0, 0.0, 0.0, -0.1])  # 10 cm above the table
+    assert np.array_equal(fit_table_plane(clouds[1], _SCENE_PARAMS, off), second)
 
 
 # --- clusters: count, pose, extents --------------------------------------------------------

@@ -3,6 +3,8 @@ success) through :class:`smccli.world.truth.Truth`."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import mujoco
 import numpy as np
 import pytest
@@ -242,3 +244,31 @@ def test_no_object_moves_while_the_robot_stands_still(name: str, variant: str | 
     # A reset to a layout that shows them puts them back in the world.
     sim.reset(nominal_layout(scene, None) if scene.variants else None)
     assert (m.geom_group == sim._geom_group0).all() and (m.geom_contype == sim._geom_contype0).all()
+
+
+@pytest.mark.parametrize("region", [(60, 150, 100, 220), (0, 37, 291, 320), (10, 10, 5, 50)])
+def test_a_region_of_the_camera_is_the_frame_there_and_no_reading_elsewhere(pick_sim, region):
+    """A look renders only a window of the image: its colours are the whole frame's, its
+    depths within a micrometre of them (another projection matrix), and outside it there
+    is no reading."""
+    whole = pick_sim.render_camera()
+    part = pick_sim.render_camera(region)
+    v0, v1, u0, u1 = region
+    inside = np.zeros(whole.depth.shape, dtype=bool)
+    inside[v0:v1, u0:u1] = True
+    assert np.array_equal(part.rgb[inside], whole.rgb[inside])
+    assert np.abs(part.depth[inside] - whole.depth[inside]).max(initial=0.0) < 1e-5
+    assert not part.depth[~inside].any() and not part.rgb[~inside].any()
+    assert np.array_equal(part.K, whole.K) and np.array_equal(
+        part.T_world_camera, whole.T_world_camera
+    )
+
+
+def test_a_camera_with_noise_renders_the_whole_frame_for_a_region() -> None:
+    """Noise draws cover the whole image: a region would change every later draw."""
+    scene = load_scene(
+        Path(__file__).parent.parent / "smccli/bench/scenes/bench_pick_realistic/scene.yaml"
+    )
+    sim = Sim(scene)
+    part = sim.render_camera((60, 150, 100, 220))
+    assert np.count_nonzero(part.depth[:60]) > 0.5 * part.depth[:60].size

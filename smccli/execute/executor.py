@@ -35,6 +35,7 @@ from smccli.execute.looking import (
     LOOK_NEAR,
     LOOK_PERIOD,
     check_look_period,
+    look,
     look_crop,
     steer,
 )
@@ -46,7 +47,7 @@ from smccli.execute.sensing import Sensors
 from smccli.execute.speed import MAX_POI_SPEED, at_speed, check_speed, peak_speed, speed_limit
 from smccli.learn.dmp import rollout
 from smccli.learn.tree import ROOT, Edge, Tree
-from smccli.perception import Cluster, clusters_from_frame, scale_reading
+from smccli.perception import Cluster, scale_reading
 from smccli.perception.scan import align_scans
 from smccli.world.controller import ARRIVAL_TOLERANCE, reachable
 from smccli.world.geometry import between, compose, se2, se2_pose
@@ -394,10 +395,7 @@ class TreeExecutor:
             next_look = s.t + self.look_period
             if np.linalg.norm(self._poi_now()[:3] - act[:3]) < LOOK_NEAR:
                 continue
-            frame = s.render_camera()
-            clusters = clusters_from_frame(
-                frame, s.robot_geometry(), look_crop(seen, self.params.perception)
-            )
+            clusters = look(s, seen, self.params.perception)
             found = self.policy.look_again(plan, seen, clusters)
             if found is None:
                 continue

@@ -98,8 +98,22 @@ class Sensors:
             raise SmcError(f"robot {self.robot.name!r} has no lidar")
         return pose
 
-    def render_camera(self) -> CameraFrame:
-        return self._sim.render_camera()
+    def render_camera(self, region: tuple[int, int, int, int] | None = None) -> CameraFrame:
+        """An RGB-D frame; with ``region`` ``(v0, v1, u0, u1)`` only those rows and columns
+        are read (elsewhere no reading): :meth:`Sim.render_camera`."""
+        return self._sim.render_camera(region)
+
+    def camera_view(self) -> tuple[np.ndarray, np.ndarray, tuple[int, int], float]:
+        """The camera's intrinsics K (3, 3) [px], pose T_world_camera (4, 4, optical frame),
+        image shape (h, w) and near clipping distance [m]: where a frame's pixels look,
+        before rendering it."""
+        cam = self._sim.scene.camera
+        return (
+            self._sim.camera_matrix(),
+            self._sim.camera_pose(),
+            (cam.height, cam.width),
+            self._sim.camera_near(),
+        )
 
     def robot_geometry(self) -> RobotGeometry:
         """The robot's own links from its kinematic model and joint readings (self-filter)."""

@@ -16,6 +16,7 @@ import mujoco
 import numpy as np
 
 from smccli.errors import SceneError
+from smccli.world.camera import CameraRenderer
 from smccli.world.controller import CartesianController, poi_pose
 from smccli.world.geometry import (
     between,
@@ -28,7 +29,7 @@ from smccli.world.geometry import (
 from smccli.world.layout import nominal_layout, place_objects
 from smccli.world.lidar import Lidar, LidarReading
 from smccli.world.marker import MARKER_BODY, MARKER_RADIUS, with_target_marker
-from smccli.world.noise import NoisySensors
+from smccli.world.noise import CameraNoise, NoisySensors
 from smccli.world.robot import robot_only_groups
 from smccli.world.robot_model import RobotModel
 from smccli.world.scene import HIDDEN_GROUP, ROBOT_KEY, Layout, ObjectSpec, Scene
@@ -110,7 +111,6 @@ class Sim:
         self._index_robot()
         self._index_sensors()
         self._index_world()
-        self._renderer: mujoco.Renderer | None = None
         self._robot: RobotModel | None = None
         self._last = PoiCommand(0.0, np.zeros(4), 1.0)
         # A layout moves static bodies in the model itself: reset starts from these, so a
@@ -167,6 +167,9 @@ class Sim:
                 self._lidar = Lidar(m, s.target, ignore_group=(*own, HIDDEN_GROUP))
                 self._lidar_site = self._id(mujoco.mjtObj.mjOBJ_SITE, s.target)
         self._cam_id = self._id(mujoco.mjtObj.mjOBJ_CAMERA, scene.camera.name)
+        self._camera = CameraRenderer(
+            self.model, self._cam_id, scene.camera.height, scene.camera.width
+        )
         self._scale_sensor = None
         if scene.scale is not None:
             sid = self._id(mujoco.mjtObj.mjOBJ_SENSOR, f"{scene.scale}_force")
@@ -463,9 +466,20 @@ class Sim:
 
     # --- camera ------------------------------------------------------------------------
 
-    def render_camera(self) -> CameraFrame:
-        """RGB and metric depth (along the optical axis) from the scene's sensor camera."""
-        rgb, depth = self._render()
+    def render_camera(self, region: tuple[int, int, int, int] | None = None) -> CameraFrame:
+        """RGB and metric depth (along the optical axis) from the scene's sensor camera.
+
+        ``region`` ``(v0, v1, u0, u1)``: only rows ``v0:v1`` and columns ``u0:u1`` are
+        rendered (a look at one object: a third of a frame's time), the rest of the image
+        holds no reading (depth 0, black). Its colours are the whole frame's; its depths
+        may differ from them in the last bits (a micrometre: another projection matrix).
+        A camera with noise renders the whole frame whatever ``region`` says: the noise's
+        draws cover all of it, and a region would change every later draw.
+        """
+        if self.sensor_noise.noise.camera != CameraNoise():
+            region = None
+        cam = self._camera
+        rgb, depth = cam.render(self.data) if region is None else cam.region(self.data, region)
         frame = CameraFrame(
             t=self.t,
             rgb=rgb,
@@ -476,40 +490,16 @@ class Sim:
         )
         return self.sensor_noise.frame(frame)
 
+    def camera_near(self) -> float:
+        """The camera's near clipping distance [m]: no depth reading is nearer."""
+        return self._camera.near
+
     def start_camera(self) -> None:
         """Build the camera's renderer and render one frame, discarded, unless it runs
         already: a GL context's first frames are slow (shaders, buffers), and a decision's
         latency should not include them. Draws no sensor noise, so an episode's readings do
         not depend on whether its simulator is new or reset."""
-        if self._renderer is None:
-            self._render()
-
-    def _render(self) -> tuple[np.ndarray, np.ndarray]:
-        """RGB (h, w, 3) uint8 and depth (h, w) float32 [m], 0 where nothing is seen."""
-        cam = self.scene.camera
-        if self._renderer is None:
-            self._renderer = mujoco.Renderer(self.model, cam.height, cam.width)
-            self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
-            self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
-        r = self._renderer
-        opt = mujoco.MjvOption()
-        opt.geomgroup[:] = 1
-        opt.geomgroup[HIDDEN_GROUP] = 0  # the teleop marker, parked objects: not the world's
-        opt.sitegroup[:] = 0  # sites (the POI marker) are not seen by a real camera
-        r.update_scene(self.data, camera=self._cam_id, scene_option=opt)
-        rgb = r.render().copy()
-        # Depth is a second pass: mujoco.Renderer draws it with segmentation colours, and
-        # its depth then differs from the lit pass's by about 1 mm at the table;
-        # logs hold the segmented pass's, so replay must perceive the same.
-        r.enable_depth_rendering()
-        r.update_scene(self.data, camera=self._cam_id, scene_option=opt)
-        # mujoco.Renderer already linearises the depth buffer to metres along the optical
-        # axis (z-depth, not ray length), which is what CameraFrame wants.
-        depth = r.render().astype(np.float32)
-        r.disable_depth_rendering()
-        far = self.model.vis.map.zfar * self.model.stat.extent
-        depth[depth >= 0.999 * far] = 0.0
-        return rgb, depth
+        self._camera.start(self.data)
 
     def camera_matrix(self) -> np.ndarray:
         """Pinhole intrinsics from the camera's vertical field of view, shape (3, 3) [px].
@@ -541,9 +531,7 @@ class Sim:
 
     def close(self) -> None:
         """Free the renderer's GL context."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._camera.close()
 
 
 def model_id(model: mujoco.MjModel, kind: mujoco.mjtObj, name: str, scene: str) -> int:

@@ -1,0 +1,132 @@
+"""The sensor camera's renderer: RGB and metric depth of a MuJoCo camera, the whole image
+or a window of it (:class:`CameraRenderer`, used by :meth:`smccli.world.sim.Sim.render_camera`).
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from smccli.world.scene import HIDDEN_GROUP
+
+
+class CameraRenderer:
+    """Renders camera ``cam_id`` of ``model`` at ``height`` x ``width`` pixels: a lit pass
+    for colour, a segmented pass for depth (mujoco.Renderer's passes). Its GL context is
+    built at the first frame."""
+
+    def __init__(self, model: mujoco.MjModel, cam_id: int, height: int, width: int) -> None:
+        self.model = model
+        self.cam_id = cam_id
+        self.height = height
+        self.width = width
+        self._renderer: mujoco.Renderer | None = None
+
+    @property
+    def near(self) -> float:
+        """The near clipping distance [m]: no depth reading is nearer."""
+        return float(self.model.vis.map.znear * self.model.stat.extent)
+
+    def start(self, data: mujoco.MjData) -> None:
+        """Build the renderer and render one frame, discarded, unless it runs already."""
+        if self._renderer is None:
+            self.render(data)
+
+    def close(self) -> None:
+        """Free the GL context."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def _option(self) -> mujoco.MjvOption:
+        """What the camera sees: every geom group but the hidden one, no sites."""
+        opt = mujoco.MjvOption()
+        opt.geomgroup[:] = 1
+        opt.geomgroup[HIDDEN_GROUP] = 0  # the teleop marker, parked objects: not the world's
+        opt.sitegroup[:] = 0  # sites (the POI marker) are not seen by a real camera
+        return opt
+
+    def _ready(self) -> mujoco.Renderer:
+        if self._renderer is None:
+            self._renderer = mujoco.Renderer(self.model, self.height, self.width)
+            self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
+            self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
+        return self._renderer
+
+    def render(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        """RGB (h, w, 3) uint8 and depth (h, w) float32 [m], 0 where nothing is seen."""
+        r = self._ready()
+        opt = self._option()
+        r.update_scene(data, camera=self.cam_id, scene_option=opt)
+        rgb = r.render().copy()
+        # Depth is a second pass: mujoco.Renderer draws it with segmentation colours, and
+        # its depth then differs from the lit pass's by about 1 mm at the table;
+        # logs hold the segmented pass's, so replay must perceive the same.
+        r.enable_depth_rendering()
+        r.update_scene(data, camera=self.cam_id, scene_option=opt)
+        # mujoco.Renderer already linearises the depth buffer to metres along the optical
+        # axis (z-depth, not ray length), which is what CameraFrame wants.
+        depth = r.render().astype(np.float32)
+        r.disable_depth_rendering()
+        far = self.model.vis.map.zfar * self.model.stat.extent
+        depth[depth >= 0.999 * far] = 0.0
+        return rgb, depth
+
+    def region(
+        self, data: mujoco.MjData, region: tuple[int, int, int, int]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """As :meth:`render`, drawing only rows ``v0:v1`` and columns ``u0:u1`` of
+        ``region``; the rest holds no reading (depth 0, black).
+
+        The GL frustum is cut to that window and drawn in a viewport of its size: the same
+        pixel rays at a fraction of the fill (llvmpipe's cost: about a third of a frame's
+        time for a look's window). Colours come out as the whole frame's; depths may differ
+        in the last bits (another projection matrix: a micrometre). The two passes and
+        the depth linearisation are mujoco.Renderer's, with its scene and GL context (its
+        ``render`` always draws the whole viewport).
+        """
+        h, w = self.height, self.width
+        v0, v1, u0, u1 = region
+        rgb = np.zeros((h, w, 3), dtype=np.uint8)
+        depth = np.zeros((h, w), dtype=np.float32)
+        if v1 <= v0 or u1 <= u0:
+            return rgb, depth
+        r = self._ready()
+        r._gl_context.make_current()
+        scene, ctx = r.scene, r._mjr_context
+        rect = mujoco.MjrRect(0, 0, u1 - u0, v1 - v0)
+        flags = scene.flags.copy()
+        out_rgb = np.empty((v1 - v0, u1 - u0, 3), dtype=np.uint8)
+        buffer = np.empty((v1 - v0, u1 - u0), dtype=np.float32)
+        for segment in (False, True):
+            r.update_scene(data, camera=self.cam_id, scene_option=self._option())
+            for c in scene.camera:  # GL rows count up from the image's bottom
+                pixel = (c.frustum_top - c.frustum_bottom) / h
+                c.frustum_center += (0.5 * (u0 + u1) - 0.5 * w) * pixel
+                c.frustum_bottom, c.frustum_top = (
+                    c.frustum_bottom + (h - v1) * pixel,
+                    c.frustum_bottom + (h - v0) * pixel,
+                )
+            scene.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = segment
+            scene.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = segment
+            mujoco.mjr_render(rect, scene, ctx)
+            if segment:
+                mujoco.mjr_readPixels(None, buffer, rect, ctx)
+            else:
+                mujoco.mjr_readPixels(out_rgb, None, rect, ctx)
+            np.copyto(scene.flags, flags)
+        rgb[v0:v1, u0:u1] = np.flipud(out_rgb)
+        depth[v0:v1, u0:u1] = np.flipud(self._metric(buffer))
+        return rgb, depth
+
+    def _metric(self, buffer: np.ndarray) -> np.ndarray:
+        """A reversed-Z depth buffer in metres along the optical axis, float32, 0 where
+        nothing is seen: mujoco.Renderer's arithmetic, in its precisions."""
+        extent = self.model.stat.extent
+        znear = np.float32(self.model.vis.map.znear * extent)
+        zfar = np.float32(self.model.vis.map.zfar * extent)
+        c_coef = np.float32(-0.5) * (-(zfar + znear) / (zfar - znear)) - np.float32(0.5)
+        d_coef = np.float32(-0.5) * (-(np.float32(2) * zfar * znear) / (zfar - znear))
+        depth = (d_coef / (buffer.astype(np.float64) + c_coef)).astype(np.float32)
+        depth[depth >= 0.999 * self.model.vis.map.zfar * extent] = 0.0
+        return depth
