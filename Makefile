@@ -87,6 +87,7 @@ bench: setup
 	$(PY) -m smccli.bench.record
 	$(PY) -m smccli.bench.compile
 	$(PY) -m smccli.bench.throughput
+	$(PY) -m smccli.bench.trial_cost
 	$(PY) -m smccli.bench.duration
 	$(PY) -m smccli.bench.paper
 	$(PY) -m smccli.bench.rooms

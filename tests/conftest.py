@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from zygote import Zygote
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -25,10 +26,21 @@ SMC_ENV = {**os.environ, "COLUMNS": "250", "MUJOCO_GL": os.environ.get("MUJOCO_G
 """The real command's environment: wide tables (rows do not wrap), headless rendering."""
 
 
+_ZYGOTE = Zygote(SMC_ENV, REPO)
+
+
 def smc(
     *args: str | Path, timeout: float = 300, cwd: Path = REPO
 ) -> subprocess.CompletedProcess[str]:
-    """Run the real ``smc`` command (``python -m smccli.cli ARGS``) in a subprocess."""
+    """Run the real ``smc`` command (``python -m smccli.cli ARGS``) in a process of its own,
+    forked from one that has already imported smc (:mod:`zygote`)."""
+    return _ZYGOTE.run([str(a) for a in args], Path(cwd), timeout)
+
+
+def smc_process(
+    *args: str | Path, timeout: float = 300, cwd: Path = REPO
+) -> subprocess.CompletedProcess[str]:
+    """``python -m smccli.cli ARGS`` started from nothing (what a user's shell does)."""
     return subprocess.run(
         [sys.executable, "-m", "smccli.cli", *map(str, args)],
         capture_output=True,
@@ -37,6 +49,10 @@ def smc(
         env=SMC_ENV,
         cwd=cwd,
     )
+
+
+def pytest_sessionfinish(session, exitstatus) -> None:
+    _ZYGOTE.close()
 
 
 def sha256(path: Path) -> str:

@@ -14,6 +14,7 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+from conftest import smc  # noqa: E402
 from replay_fixtures import REPO, build, cache_root  # noqa: E402
 
 from smccli.execute.episode import (  # noqa: E402
@@ -42,16 +43,8 @@ def pick_demo1(tmp_path_factory) -> tuple[list[Path], Path]:
     return build(cache_root(tmp_path_factory), "pick_place", ["demo1"])
 
 
-def cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    env = {**os.environ, "MUJOCO_GL": "egl", "COLUMNS": "200"}
-    return subprocess.run(
-        [PY, "-m", "smccli.cli", "replay", *args],
-        capture_output=True,
-        text=True,
-        env=env,
-        cwd=cwd,
-        timeout=300,
-    )
+def cli(*args: str, cwd: Path = REPO) -> subprocess.CompletedProcess:
+    return smc("replay", *args, cwd=cwd)
 
 
 def decisions_of(result: EpisodeResult) -> list[tuple]:

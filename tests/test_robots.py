@@ -38,7 +38,8 @@ def test_smc_robots_lists_two_arms() -> None:
 def test_smc_robots_checks_a_users_robot_file(tmp_path: Path) -> None:
     proc = smc("robots", SIX / "robot.yaml")
     assert proc.returncode == 0, proc.stderr
-    assert any(line.split("│")[1].strip() == "six" for line in proc.stdout.splitlines()[3:-1])
+    rows = [line for line in proc.stdout.splitlines() if line.startswith("│")]
+    assert any(line.split("│")[1].strip() == "six" for line in rows)
     old, new, parts = BROKEN_ROBOTS["unknown-site"]
     _broken_copy(tmp_path, old, new)
     robot_file = tmp_path / "robots" / "six" / "robot.yaml"

@@ -161,15 +161,16 @@ def _tree(folder: Path, scene: Path, parts: list[str]) -> Path:
 
 @pytest.mark.slow
 def test_all_of_gives_nothing_to_half_a_task(tmp_path: Path) -> None:
-    """0 % for a tree that does only the first half of a two-object
-    task scored with all_of, >= 95 % for the whole one, 40 trials each."""
+    """0 % for a tree that does only the first half of a two-object task scored with
+    all_of, at least 11 in 12 for the whole one: 12 trials each (what is checked is how all_of
+    scores, not a success rate; the campaign figures measure rates)."""
     from smccli.execute.episode import resolve
 
     scene = two_object_scene(tmp_path, {"both": {"all_of": [CUBE, PYRAMID]}})
     rates = {}
     for parts in (["cube"], ["cube", "pyramid"]):
         tree, sc = resolve(_tree(tmp_path, scene, parts), str(scene))
-        results = run_trials(tree, sc, trials=40, seed=0, workers=2)
+        results = run_trials(tree, sc, trials=12, seed=0, workers=2)
         rates["_".join(parts)] = sum(r.success for r in results) / len(results)
         assert all(len(r.criteria) == 2 for r in results if r.outcome != "no_contingent_smc")
         if parts == ["cube"]:  # the leaf came with the pyramid untouched: taught too little
@@ -178,7 +179,7 @@ def test_all_of_gives_nothing_to_half_a_task(tmp_path: Path) -> None:
                 r.outcome for r in done
             }
     assert rates["cube"] == 0.0, rates
-    assert rates["cube_pyramid"] >= 0.95, rates
+    assert rates["cube_pyramid"] >= 11 / 12, rates
 
 
 # --- checked demonstrations -------------------------------------------------------------------
@@ -215,6 +216,42 @@ def test_a_demonstration_that_fails_its_task_is_marked_shown_warned_and_refused(
     proc = smc("compile", half, "--strict", "-o", tmp_path / "cli.json")
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert not (tmp_path / "cli.json").exists()
+
+
+def test_smc_record_exits_1_when_the_demonstration_fails_its_task_and_keeps_it(
+    tmp_path: Path,
+) -> None:
+    """A demonstration that only moves above the cube fails the scene's task: exit 1, one
+    error line naming the kept log; ``--allow-failed`` (a recording meant to fail) exits 0
+    with the verdict as a warning. A scene without a task is no failure (exit 0)."""
+    from conftest import smc
+
+    from smccli.logs import read_log
+
+    scene = two_object_scene(tmp_path, {"both": {"all_of": [CUBE, PYRAMID]}})
+    script = tmp_path / "hover.yaml"
+    step = {"move_to": {"object": "orange_cube", "offset": [0, 0, 0.12]}}
+    script.write_text(yaml.safe_dump({"scene": str(scene), "speed": 0.3, "steps": [step]}))
+    log = tmp_path / "hover.mcap"
+    proc = smc("record", "--scene", scene, "--script", script, "-o", log)
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
+    assert proc.returncode == 1, proc.stderr
+    assert len(errors) == 1 and str(log) in errors[0], proc.stderr
+    assert "failed its task" in errors[0] and "--allow-failed" in errors[0], errors[0]
+    assert log.is_file() and read_log(log, topics=()).task["success"] is False
+    proc = smc(
+        "record", "--scene", scene, "--script", script, "-o", log, "--force", "--allow-failed"
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "error:" not in proc.stderr and "warning:" in proc.stderr, proc.stderr
+    assert "failed its task" in proc.stderr and log.is_file()
+    raw = yaml.safe_load(scene.read_text())
+    raw.pop("success")
+    no_task = scene.with_name("no_task.yaml")
+    no_task.write_text(yaml.safe_dump(raw, sort_keys=False))
+    script.write_text(yaml.safe_dump({"scene": str(no_task), "speed": 0.3, "steps": [step]}))
+    proc = smc("record", "--scene", no_task, "--script", script, "-o", tmp_path / "n.mcap")
+    assert proc.returncode == 0 and "failed" not in proc.stderr, proc.stderr
 
 
 # --- scenes travel --------------------------------------------------------------------------

@@ -4,13 +4,17 @@ checked and listed."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.markup import escape
 from rich.table import Table
 
-from smccli.commands.console import out
+from smccli.commands.console import err, one_line, out
+
+if TYPE_CHECKING:
+    from smccli.world.robot import Robot
+    from smccli.world.scene import Scene
 
 
 def scenes(
@@ -40,22 +44,83 @@ def robots(
         list[Path] | None,
         typer.Argument(help="Robot files of your own (robot.yaml) to check and list too."),
     ] = None,
+    scene: Annotated[
+        str | None,
+        typer.Option(
+            help="Check the robot of this scene (built-in name or scene.yaml) in it: its "
+            "object ranges and its camera too.",
+        ),
+    ] = None,
 ) -> None:
-    """List the built-in robots (and check your own): degrees of freedom, gripper, sensors."""
-    from smccli.world.robot import list_robots, load_robot
+    """List the built-in robots (and check your own): degrees of freedom, gripper, sensors.
 
-    found = list_robots() + [load_robot(f) for f in files or []]
+    A robot file given, or a scene's robot, is also run in simulation (gripper, home
+    posture, reach, POI); exit 2 when a check fails."""
+    from smccli.world.robot import list_robots, load_robot
+    from smccli.world.scene import load_scene
+
+    mine = [load_robot(f) for f in files or []]
+    in_scene = load_scene(scene) if scene is not None else None
+    found = list_robots() + mine
+    listed = {r.path for r in found}
+    if in_scene is not None and in_scene.robot.path not in listed:
+        found.append(in_scene.robot)
     table = Table("robot", "DoF", "gripper", "sensors", "description")
     for r in found:
-        g = r.gripper
-        gripper = (
-            "none"
-            if g is None
-            else f"{len(g.joints)} finger{'s' if len(g.joints) != 1 else ''}, "
-            f"{g.closed:g}-{g.open:g} per finger ({g.actuator})"
-        )
-        mounted = [f"{s.type} {s.name}" for s in r.sensors]
-        sensors = ", ".join(["joint encoders", *mounted])
-        dof = f"{r.dof}" + (" (base 3)" if r.base else "")
-        table.add_row(*(escape(x) for x in (r.name, dof, gripper, sensors, r.description)))
+        table.add_row(*(escape(x) for x in _robot_row(r)))
     out.print(table)
+    benches: list[tuple[Robot, Scene | None]] = [
+        (r, None) for r in mine if in_scene is None or r.path != in_scene.robot.path
+    ]
+    if in_scene is not None:
+        benches.append((in_scene.robot, in_scene))
+    failed = []
+    for robot, where in benches:
+        failed += _simulation_checks(robot, where)
+    for line in failed:
+        err.print(f"[bold red]error:[/] {one_line(line)}", highlight=False, soft_wrap=True)
+    if failed:
+        raise typer.Exit(2)
+
+
+def _robot_row(r: Robot) -> tuple[str, ...]:
+    """A robot's row in ``smc robots``' table."""
+    g = r.gripper
+    gripper = (
+        "none"
+        if g is None
+        else f"{len(g.joints)} finger{'s' if len(g.joints) != 1 else ''}, "
+        f"{g.closed:g}-{g.open:g} per finger ({g.actuator})"
+    )
+    mounted = [f"{s.type} {s.name}" for s in r.sensors]
+    sensors = ", ".join(["joint encoders", *mounted])
+    dof = f"{r.dof}" + (" (base 3)" if r.base else "")
+    return (r.name, dof, gripper, sensors, r.description)
+
+
+_SHOWN = {"pass": "[green]pass[/]", "fail": "[bold red]FAIL[/]", "skip": "[dim]skip[/]"}
+
+
+def _simulation_checks(robot: Robot, scene: Scene | None) -> list[str]:
+    """Run and print the simulation checks of ``robot`` (in ``scene``, else alone on a
+    table); one line per failed check, naming the file to change."""
+    from smccli.world.robot_checks import simulation_checks
+
+    findings = simulation_checks(robot, scene)
+    robot_file = str(robot.path or robot.name)
+    where = f"in scene {scene.name}" if scene is not None else "alone on a table"
+    table = Table(
+        "check", "result", "measured", "fix", title=f"{escape(robot_file)} {escape(where)}"
+    )
+    for f in findings:
+        table.add_row(f.check, _SHOWN[f.status], escape(f.measured), escape(f.fix))
+    out.print(table)
+    lines = []
+    for f in findings:
+        if f.status == "fail":
+            # Ranges are the scene file's; everything else is the robot file's (or its MJCF's).
+            file = (
+                str(scene.yaml_path or scene.name) if f.check == "reach" and scene else robot_file
+            )
+            lines.append(f"{file}: {f.check}: {f.measured}; {f.fix}")
+    return lines

@@ -11,9 +11,10 @@ from rich.markup import escape
 from rich.progress import TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from smccli.commands.console import err, live, out, say, warn
+from smccli.commands.console import err, live, one_line, out, say, warn
 
 if TYPE_CHECKING:
+    from smccli.record.session import RecordSummary
     from smccli.world.scene import Scene
 
 
@@ -48,8 +49,18 @@ def record(
             "Enter keeps one and goes on, X records it again, Esc ends the session).",
         ),
     ] = 1,
+    allow_failed: Annotated[
+        bool,
+        typer.Option(
+            help="Exit 0 when a demonstration fails its scene's task (one meant to fail, "
+            "e.g. to teach a recovery); without it such a recording is kept and smc exits 1.",
+        ),
+    ] = False,
 ) -> None:
-    """Record a demonstration (or a session of them) into MCAP logs."""
+    """Record a demonstration (or a session of them) into MCAP logs.
+
+    Exit 1 when a demonstration failed its scene's task (the log is kept), 130 when
+    interrupted (the log is kept, marked interrupted), 2 on bad input (no log)."""
     from smccli.record.session import RecordConfig, record_episodes
 
     cfg = RecordConfig(
@@ -84,11 +95,17 @@ def record(
                 next_line[0] += 1.0
 
         summaries = record_episodes(cfg, on_status=status, on_message=say)
+    _report(summaries, scene, allow_failed)
+
+
+def _report(summaries: list[RecordSummary], scene: str, allow_failed: bool) -> None:
+    """Print what each log holds; exit 130 when the session was interrupted, 1 when a
+    demonstration failed its task (without ``allow_failed``)."""
     from smccli.world.scene import load_scene
 
     recorded_in = load_scene(scene)
     for summary in summaries:
-        _print_summary(summary, recorded_in)
+        _print_summary(summary, recorded_in, allow_failed)
     summary = summaries[-1]
     if summary.interrupted:
         say(
@@ -96,9 +113,14 @@ def record(
             f"{summary.duration:.1f} s, marked interrupted in its metadata"
         )
         raise typer.Exit(130)
+    if not allow_failed and any(s.failed_task for s in summaries):
+        # Scripts and CI see in the exit code what a person sees in the verdict line;
+        # the recording stays (a failed demonstration is evidence, and --allow-failed
+        # keeps the ones meant to fail).
+        raise typer.Exit(1)
 
 
-def _print_summary(summary, scene: Scene) -> None:
+def _print_summary(summary: RecordSummary, scene: Scene, allow_failed: bool) -> None:
     out.print(
         f"[bold green]wrote[/] {escape(str(summary.path))}  ({summary.size_bytes / 1e6:.2f} MB, "
         f"{summary.duration:.1f} s, {summary.fragments} fragment(s) marked)"
@@ -110,8 +132,17 @@ def _print_summary(summary, scene: Scene) -> None:
     task = summary.task or {}
     if task.get("success") is True:
         out.print("[green]task achieved[/]")
-    elif task.get("success") is False:
-        warn(f"{summary.path}: the demonstration failed its task ({task.get('reason')})")
+    elif summary.failed_task:
+        failed = f"{summary.path}: the demonstration failed its task ({task.get('reason')})"
+        if allow_failed or summary.interrupted:
+            warn(failed)
+        else:
+            err.print(
+                f"[bold red]error:[/] {one_line(failed)}; the recording is kept (record it "
+                "again, or --allow-failed for a demonstration meant to fail)",
+                highlight=False,
+                soft_wrap=True,
+            )
     if summary.interrupted is None:  # what compile will say about it, said now
         from smccli.learn.chain import demonstration_warnings
 

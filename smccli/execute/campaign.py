@@ -6,8 +6,8 @@ whatever the number of workers (each trial starts from the state a fresh simulat
 a worker keeps one simulator and resets it; perception and control are deterministic).
 A trial runs on one BLAS thread (numpy's and scipy's OpenBLAS): the workers are the
 parallelism, and idle OpenBLAS threads spinning beside them take CPU from the trials.
-Workers are processes of the ``spawn`` context (EGL contexts do not
-survive ``fork``), or the workers of an existing Dask cluster (``cluster``: its scheduler's
+Workers are processes started clean (:mod:`smccli.workers`: EGL contexts do not survive
+``fork``), or the workers of an existing Dask cluster (``cluster``: its scheduler's
 address), each trial one task. Campaigns write no replay log and render only at decision
 points.
 
@@ -25,7 +25,6 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import json  # noqa: E402
 import math  # noqa: E402
-import multiprocessing as mp  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable, Iterator, Mapping, Sequence  # noqa: E402
@@ -34,7 +33,6 @@ from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
-from scipy.stats import binomtest  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402
 
 from smccli.errors import SmcError  # noqa: E402
@@ -43,6 +41,7 @@ from smccli.execute.evaluation import OUTCOMES  # noqa: E402
 from smccli.execute.executor import LOOK_PERIOD, check_look_period, check_speed  # noqa: E402
 from smccli.learn.tree import Tree, digest  # noqa: E402
 from smccli.outputs import check_output, write_atomic  # noqa: E402
+from smccli.workers import clean_context  # noqa: E402
 from smccli.world.geometry import wrap  # noqa: E402
 from smccli.world.scene import ROBOT_KEY, Layout, Scene  # noqa: E402
 from smccli.world.sim import OdometryDrift, Sim  # noqa: E402
@@ -58,6 +57,9 @@ def wilson(successes: int, n: int, confidence: float = 0.95) -> tuple[float, flo
     """Wilson score interval (lo, hi) of a binomial proportion; (0, 1) when n = 0."""
     if n <= 0:
         return 0.0, 1.0  # no trial: the rate may be anything (scipy refuses n = 0)
+    # scipy.stats takes 0.9 s to import: only a campaign's summary needs it.
+    from scipy.stats import binomtest
+
     ci = binomtest(successes, n).proportion_ci(confidence_level=confidence, method="wilson")
     return float(ci.low), float(ci.high)
 
@@ -396,7 +398,7 @@ def run_trials(
         finally:
             sims.close()
     else:
-        ctx = mp.get_context("spawn")
+        ctx = clean_context([__name__])
         with ctx.Pool(
             min(workers, len(todo)),
             initializer=_init_worker,

@@ -10,7 +10,6 @@ from __future__ import annotations
 import contextlib
 import datetime as dt
 import json
-import multiprocessing
 import os
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -35,6 +34,7 @@ from smccli.logs import read_log
 from smccli.logs import topics as tp
 from smccli.logs.ros2_bag import ROLE_OF, ROLES, TopicMap, read_ros2_bag
 from smccli.outputs import ExclusiveLock, check_output
+from smccli.workers import clean_context
 from smccli.world.scene import robot_identity, scene_of_log, sensor_identity
 
 
@@ -215,16 +215,8 @@ def default_workers(n_logs: int) -> int:
 
 
 def _pool(workers: int) -> ProcessPoolExecutor:
-    """Worker processes that never fork a process holding MuJoCo or GL state: a fork
-    server that has only imported this module (no model, no context) forks them, which
-    spares each the ~2 s of imports (and a later compile in the same process the server's);
-    spawn where there is no fork server. Not the caller's ``__main__``: a script without
-    the ``if __name__ == "__main__":`` guard would run in the server."""
-    methods = multiprocessing.get_all_start_methods()
-    ctx = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
-    if ctx.get_start_method() == "forkserver":
-        ctx.set_forkserver_preload([__name__])
-    return ProcessPoolExecutor(workers, mp_context=ctx)
+    """Worker processes that start with this module imported (:mod:`smccli.workers`)."""
+    return ProcessPoolExecutor(workers, mp_context=clean_context([__name__]))
 
 
 WORKER_ENV = {"OPENBLAS_THREAD_TIMEOUT": "4"}

@@ -102,6 +102,13 @@ class RecordSummary:
     task: dict | None = None
     """The log's task verdict (``smc_end``): ``{success, reason, criteria}``."""
 
+    @property
+    def failed_task(self) -> bool:
+        """Whether the recorder judged that the demonstration failed its scene's task (a
+        scene without a task, or a verdict not checked, is not a failure); ``smc record``
+        then exits 1 unless ``--allow-failed``."""
+        return self.task is not None and self.task.get("success") is False
+
 
 def _metadata(scene: Scene, cfg: RecordConfig, extra: dict[str, str]) -> dict[str, str]:
     return {

@@ -132,6 +132,8 @@ def compose(a: ArrayLike, b: ArrayLike) -> np.ndarray:
     ``a`` (..., 3) or (..., 4), ``b`` (..., 3) or (..., 4); the result has ``b``'s shape
     (broadcast). Heights add when both have one; yaws add, unwrapped."""
     a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    if a.ndim == 1 and b.ndim == 1:
+        return _one_pose(a, b, inverse_a=False)
     c, s = np.cos(a[..., -1]), np.sin(a[..., -1])
     bx, by = b[..., 0], b[..., 1]
     out = [a[..., 0] + c * bx - s * by, a[..., 1] + s * bx + c * by]
@@ -146,6 +148,8 @@ def between(a: ArrayLike, b: ArrayLike) -> np.ndarray:
 
     Shapes as :func:`compose`; the yaw is ``b``'s minus ``a``'s, unwrapped."""
     a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    if a.ndim == 1 and b.ndim == 1:
+        return _one_pose(a, b, inverse_a=True)
     c, s = np.cos(a[..., -1]), np.sin(a[..., -1])
     dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
     out = [c * dx + s * dy, -s * dx + c * dy]
@@ -153,6 +157,25 @@ def between(a: ArrayLike, b: ArrayLike) -> np.ndarray:
         out.append(b[..., 2] - a[..., 2] if a.shape[-1] == 4 else b[..., 2])
     out.append(b[..., -1] - a[..., -1])
     return np.stack(np.broadcast_arrays(*out), -1)
+
+
+def _one_pose(a: np.ndarray, b: np.ndarray, *, inverse_a: bool) -> np.ndarray:
+    """:func:`compose` (or :func:`between` with ``inverse_a``) of one pose with one pose,
+    the same operations on Python floats: the mobile base's odometry calls them every
+    control period, where numpy's per-call overhead was most of a step's cost."""
+    c, s = float(np.cos(a[-1])), float(np.sin(a[-1]))  # numpy's cos/sin, as for arrays
+    ax, ay, ayaw = float(a[0]), float(a[1]), float(a[-1])
+    bx, by, byaw = float(b[0]), float(b[1]), float(b[-1])
+    if inverse_a:
+        dx, dy = bx - ax, by - ay
+        out = [c * dx + s * dy, -s * dx + c * dy]
+    else:
+        out = [ax + c * bx - s * by, ay + s * bx + c * by]
+    if len(b) == 4:
+        z = float(b[2])
+        out.append((z - float(a[2]) if inverse_a else z + float(a[2])) if len(a) == 4 else z)
+    out.append(byaw - ayaw if inverse_a else ayaw + byaw)
+    return np.array(out)
 
 
 def inverse(a: ArrayLike) -> np.ndarray:
