@@ -1,5 +1,34 @@
-"""``smc robots import``: the home posture and the robot file's text, from what
-:mod:`smccli.world.robot_import` found in the vendor's files."""
+"""``smc robots import``: a robot file drafted from a vendor's arm (MJCF or URDF) and an
+optional separate gripper (MJCF), never editing them (issue 37).
+
+Each guess is data (:class:`Guess`: what, value, why); :func:`draft_robot` returns them
+with the robot file's text (:mod:`smccli.world.robot_import_arm` reads the arm,
+:mod:`smccli.world.robot_import_hand` the gripper, this module finds home and writes the
+file). What it guesses, in order:
+
+- the arm chain: the longest chain of hinge joints from the root, joints named like a
+  finger (grip, finger, jaw, claw) left to the gripper; the flange: the last arm body's
+  joint-less descendant (robosuite's ``right_hand``) where a separate gripper attaches;
+- the arm's actuators by transmission (a joint of the chain); torque motors (no bias) get
+  ``arm.servo`` with docs/robots.md's gains scaled to the arm's moving mass;
+- the gripper's actuator (joint or tendon transmission on the gripper's joints), a second
+  finger with its own actuator coupled to the first (``gripper.couple``);
+- its commands: the actuator driven to each end of its ``ctrlrange`` in simulation until
+  the fingers settle; the end where the pads' tips end further apart opens
+  (``gripper.commands`` in the actuator's units, ``opening`` the finger joint's positions);
+- the POI: the gripper's own pinch site (a site named like grip, pinch or tcp) or the
+  midpoint of the pads nearest the fingertips; z along the wrist roll's axis out of the
+  fingers, y along the finger travel;
+- a mount where the first joint's axis is not at the origin or the arm does not reach
+  along +x at zero (the controller's convention);
+- home: the gripper pointing down above the table in front of the base, elbow up, by
+  least squares (scipy) on the composed model's kinematics from several seeds, keeping the
+  posture whose joints sit highest: the controller's IK
+  (:meth:`~smccli.world.controller.CartesianController.solve`) starts from a home, which is
+  what is sought here, and settles on one branch. The draft then goes through
+  :func:`~smccli.world.robot_checks.simulation_checks` (contacts at home; in a scene the
+  camera's view of the objects and the controller's reach).
+"""
 
 from __future__ import annotations
 
@@ -12,14 +41,22 @@ from scipy.optimize import least_squares
 
 from smccli.outputs import check_output, write_atomic
 from smccli.world.robot_compose import POI_SITE, PoiPlacement
-from smccli.world.robot_import_arm import HOME_PLACES, Draft, Guess, _Arm, _compose, _fmt, read_arm
-from smccli.world.robot_import_hand import _Hand, read_hand
+from smccli.world.robot_import_arm import (
+    HOME_PLACES,
+    ArmFound,
+    Draft,
+    Guess,
+    compose,
+    flow,
+    read_arm,
+)
+from smccli.world.robot_import_hand import HandFound, read_hand
 
 SEEDS = 12
 """Starting postures tried for home (the reference posture, mid-range, then random)."""
 
 
-def home_posture(arm: _Arm, m: mujoco.MjModel, guesses: list[Guess]) -> list[float]:
+def home_posture(arm: ArmFound, m: mujoco.MjModel, guesses: list[Guess]) -> list[float]:
     """The gripper pointing down (POI x along +x) in front of the first joint and above
     the table (the first of HOME_PLACES it reaches), elbow up."""
     ids = [m.joint(n).id for n in arm.names]
@@ -53,7 +90,7 @@ def home_posture(arm: _Arm, m: mujoco.MjModel, guesses: list[Guess]) -> list[flo
             f"{reach:.2f} m), elbow up (the highest of {SEEDS} solutions)"
         )
     home = [round(float(v), 4) for v in q]
-    guesses.append(Guess("arm.home", _fmt(home), why))
+    guesses.append(Guess("arm.home", flow(home), why))
     return home
 
 
@@ -103,7 +140,7 @@ def _rel(path: Path, folder: Path) -> str:
 
 
 def robot_text(
-    name: str, arm: _Arm, gripper: Path | None, hand: _Hand, home: list[float], folder: Path
+    name: str, arm: ArmFound, gripper: Path | None, hand: HandFound, home: list[float], folder: Path
 ) -> str:
     """The robot file's YAML (flow lists, comments saying it is a draft)."""
     key = "urdf" if arm.path.suffix.lower() == ".urdf" else "mjcf"
@@ -117,32 +154,32 @@ def robot_text(
         f"{key}: {_rel(arm.path, folder)}",
     ]
     if arm.mount is not None:
-        lines.append(f"mount: {{pos: {_fmt(arm.mount.pos)}, quat: {_fmt(arm.mount.quat)}}}")
-    lines += ["arm:", f"  joints: {_fmt(arm.names)}"]
+        lines.append(f"mount: {{pos: {flow(arm.mount.pos)}, quat: {flow(arm.mount.quat)}}}")
+    lines += ["arm:", f"  joints: {flow(arm.names)}"]
     if arm.servo is not None:
-        lines.append(f"  servo: {{kp: {_fmt(list(arm.servo.kp))}}}")
+        lines.append(f"  servo: {{kp: {flow(list(arm.servo.kp))}}}")
     else:
-        lines.append(f"  actuators: {_fmt(arm.actuators)}")
-    lines.append(f"  home: {_fmt(home)}")
+        lines.append(f"  actuators: {flow(arm.actuators)}")
+    lines.append(f"  home: {flow(home)}")
     lines.append(
-        f"poi: {{at: {hand.poi_at}, pos: {_fmt(hand.poi.pos)}, quat: {_fmt(hand.poi.quat)}}}"
+        f"poi: {{at: {hand.poi_at}, pos: {flow(hand.poi.pos)}, quat: {flow(hand.poi.quat)}}}"
     )
     lines.append("gripper:")
     if gripper is not None:
         lines += [f"  mjcf: {_rel(gripper, folder)}", f"  attach: {arm.flange}"]
         if hand.couple:
             pairs = ", ".join(
-                f"{{joint: {a}, to: {b}, ratio: {_fmt(r)}}}" for a, b, r in hand.couple
+                f"{{joint: {a}, to: {b}, ratio: {flow(r)}}}" for a, b, r in hand.couple
             )
             lines.append(f"  couple: [{pairs}]")
     lines += [
-        f"  joints: {_fmt(hand.joints)}",
+        f"  joints: {flow(hand.joints)}",
         f"  actuator: {hand.actuator}",
-        f"  opening: {_fmt([round(v, 4) for v in hand.opening])}",
+        f"  opening: {flow([round(v, 4) for v in hand.opening])}",
     ]
     (c0, c1), (q0, q1) = hand.commands, hand.opening
     if max(abs(c0 - q0), abs(c1 - q1)) > 0.05 * abs(q1 - q0):  # not in the joint's units
-        lines.append(f"  commands: {_fmt(list(hand.commands))}")
+        lines.append(f"  commands: {flow(list(hand.commands))}")
     return "\n".join(lines) + "\n"
 
 
@@ -156,11 +193,11 @@ def draft_robot(
     arm = read_arm(arm_file, where, guesses)
     hand = read_hand(arm, gripper, where, guesses)
     poi = PoiPlacement(hand.poi_at, hand.poi)
-    m = _compose(arm, gripper, where, couple=hand.couple, poi=poi).compile()
+    m = compose(arm, gripper, where, couple=hand.couple, poi=poi).compile()
     home = home_posture(arm, m, guesses)
     groups = sorted({int(g) for g in m.geom_group})
     guesses.append(
-        Guess("geom groups", _fmt(groups), "as the model has them (none given: smc reads them)")
+        Guess("geom groups", flow(groups), "as the model has them (none given: smc reads them)")
     )
     text = robot_text(name or out_dir.name, arm, gripper, hand, home, out_dir)
     return Draft(text, tuple(guesses))

@@ -1,27 +1,5 @@
-"""``smc robots import``: a robot file drafted from a vendor's arm (MJCF or URDF) and an
-optional separate gripper (MJCF), never editing them (issue 37).
-
-Each guess is data (:class:`Guess`: what, value, why); :func:`draft_robot` returns them
-with the robot file's text. What it guesses, in order:
-
-- the arm chain: the longest chain of hinge joints from the root, joints named like a
-  finger (grip, finger, jaw, claw) left to the gripper; the flange: the last arm body's
-  joint-less descendant (robosuite's ``right_hand``) where a separate gripper attaches;
-- the arm's actuators by transmission (a joint of the chain); torque motors (no bias) get
-  ``arm.servo`` with docs/robots.md's gains scaled to the arm's moving mass;
-- the gripper's actuator (joint or tendon transmission on the gripper's joints), a second
-  finger with its own actuator coupled to the first (``gripper.couple``);
-- its commands: the actuator driven to each end of its ``ctrlrange`` in simulation until
-  the fingers settle; the end where the pads are further apart opens
-  (``gripper.commands`` in the actuator's units, ``opening`` the finger joint's positions);
-- the POI: the gripper's own pinch site (a site named like grip, pinch or tcp) or the
-  midpoint of the pads nearest the fingertips; z along the wrist roll's axis out of the
-  fingers, y along the finger travel;
-- a mount where the first joint's axis is not at the origin or the arm does not reach
-  along +x at zero (the controller's convention);
-- home: the gripper pointing down above the table, elbow up, by least squares on the
-  composed model's kinematics, checked with the controller's IK (:func:`reach_problem`).
-"""
+"""``smc robots import``: what the arm's file says (chain, flange, actuators or servos,
+mount), and the composition the importer drafts with; see :mod:`smccli.world.robot_import`."""
 
 from __future__ import annotations
 
@@ -79,24 +57,24 @@ class Draft:
     guesses: tuple[Guess, ...]
 
 
-def _bad(path: Path, what: str) -> SceneError:
+def bad_file(path: Path, what: str) -> SceneError:
     return SceneError(f"{path}: {what}")
 
 
 def _load_model(path: Path, where: Path) -> mujoco.MjModel:
     """A vendor's file compiled alone (its assets from its own folder)."""
     if not path.is_file():
-        raise _bad(path, "not a file")
+        raise bad_file(path, "not a file")
     if path.suffix.lower() not in (".xml", ".urdf", ".mjcf"):
-        raise _bad(path, "not an MJCF (.xml) or URDF (.urdf) file")
+        raise bad_file(path, "not an MJCF (.xml) or URDF (.urdf) file")
     spec = robot_spec(Composition(arm=path.resolve()), (), str(where))
     try:
         return spec.compile()
     except ValueError as exc:
-        raise _bad(path, f"MuJoCo rejects it: {' '.join(str(exc).split())}") from None
+        raise bad_file(path, f"MuJoCo rejects it: {' '.join(str(exc).split())}") from None
 
 
-def _name(m: mujoco.MjModel, kind: mujoco.mjtObj, i: int) -> str:
+def name_of(m: mujoco.MjModel, kind: mujoco.mjtObj, i: int) -> str:
     return mujoco.mj_id2name(m, kind, i) or ""
 
 
@@ -106,7 +84,7 @@ def _hinges_above(m: mujoco.MjModel, body: int) -> list[int]:
     b = body
     while b > 0:
         for j in range(m.body_jntadr[b], m.body_jntadr[b] + m.body_jntnum[b]):
-            name = _name(m, mujoco.mjtObj.mjOBJ_JOINT, j)
+            name = name_of(m, mujoco.mjtObj.mjOBJ_JOINT, j)
             if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE and not FINGER_NAME.search(name):
                 out.append(j)
         b = int(m.body_parentid[b])
@@ -117,7 +95,7 @@ def arm_chain(m: mujoco.MjModel, path: Path) -> list[int]:
     """The joint ids of the longest hinge chain from the root (fingers left out)."""
     best = max((_hinges_above(m, b) for b in range(1, m.nbody)), key=len, default=[])
     if not best:
-        raise _bad(path, "no chain of hinge joints from its root body (not an arm)")
+        raise bad_file(path, "no chain of hinge joints from its root body (not an arm)")
     return best
 
 
@@ -131,14 +109,14 @@ def flange(m: mujoco.MjModel, last_body: int) -> str:
             for c in range(m.nbody)
             if m.body_parentid[c] == b and c != b and m.body_jntnum[c] == 0
         ]
-        named = [c for c in kids if FLANGE_NAME.search(_name(m, mujoco.mjtObj.mjOBJ_BODY, c))]
+        named = [c for c in kids if FLANGE_NAME.search(name_of(m, mujoco.mjtObj.mjOBJ_BODY, c))]
         pick = named or (kids if len(kids) == 1 else [])
         if not pick:
-            return _name(m, mujoco.mjtObj.mjOBJ_BODY, b)
+            return name_of(m, mujoco.mjtObj.mjOBJ_BODY, b)
         b = pick[0]
 
 
-def _subtree(m: mujoco.MjModel, root: int) -> set[int]:
+def subtree(m: mujoco.MjModel, root: int) -> set[int]:
     out = set()
     for b in range(m.nbody):
         a = b
@@ -150,7 +128,7 @@ def _subtree(m: mujoco.MjModel, root: int) -> set[int]:
     return out
 
 
-def _actuators_on(m: mujoco.MjModel, joints: set[int]) -> list[int]:
+def actuators_on(m: mujoco.MjModel, joints: set[int]) -> list[int]:
     """Actuators whose transmission is one of ``joints`` or a tendon over them."""
     found = []
     for a in range(m.nu):
@@ -171,7 +149,7 @@ def _is_motor(m: mujoco.MjModel, a: int) -> bool:
 def servo_gains(m: mujoco.MjModel, chain: list[int]) -> tuple[tuple[float, ...], float]:
     """docs/robots.md's kp (3000 shoulder and elbow, 800 wrist: the first ceil(n/2) joints
     are the big ones), scaled by the moving mass over BIG_MASS where lighter; the mass [kg]."""
-    moving = _subtree(m, int(m.jnt_bodyid[chain[0]]))
+    moving = subtree(m, int(m.jnt_bodyid[chain[0]]))
     mass = float(sum(m.body_mass[b] for b in moving))
     scale = min(1.0, mass / BIG_MASS)
     big = math.ceil(len(chain) / 2)
@@ -179,16 +157,16 @@ def servo_gains(m: mujoco.MjModel, chain: list[int]) -> tuple[tuple[float, ...],
     return kp, mass
 
 
-def _fmt(v: object) -> str:
+def flow(v: object) -> str:
     if isinstance(v, (list, tuple, np.ndarray)):
-        return "[" + ", ".join(_fmt(x) for x in v) + "]"
+        return "[" + ", ".join(flow(x) for x in v) + "]"
     if isinstance(v, float):
         return f"{round(v, 6) + 0.0:g}"
     return str(v)
 
 
 @dataclass(frozen=True, slots=True)
-class _Arm:
+class ArmFound:
     """What the arm's file says."""
 
     path: Path
@@ -201,27 +179,27 @@ class _Arm:
     mount: Frame | None
 
 
-def read_arm(path: Path, where: Path, guesses: list[Guess]) -> _Arm:
+def read_arm(path: Path, where: Path, guesses: list[Guess]) -> ArmFound:
     """The arm's chain, actuators, flange and mount, each guess appended to ``guesses``."""
     m = _load_model(path, where)
     chain = arm_chain(m, path)
-    names = [_name(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in chain]
+    names = [name_of(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in chain]
     last = int(m.jnt_bodyid[chain[-1]])
     fl = flange(m, last)
     guesses.append(
         Guess(
             "arm.joints",
-            _fmt(names),
+            flow(names),
             f"the longest chain of hinge joints from the root ({len(chain)}), to body "
-            f"{_name(m, mujoco.mjtObj.mjOBJ_BODY, last)!r}; flange {fl!r}",
+            f"{name_of(m, mujoco.mjtObj.mjOBJ_BODY, last)!r}; flange {fl!r}",
         )
     )
     acts: list[str] = []
     motors = 0
     for j in chain:
-        on = _actuators_on(m, {j})
+        on = actuators_on(m, {j})
         if on:
-            acts.append(_name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, on[0]))
+            acts.append(name_of(m, mujoco.mjtObj.mjOBJ_ACTUATOR, on[0]))
             motors += _is_motor(m, on[0])
     servo = None
     if len(acts) < len(chain) or motors:
@@ -235,7 +213,7 @@ def read_arm(path: Path, where: Path, guesses: list[Guess]) -> _Arm:
         guesses.append(
             Guess(
                 "arm.servo.kp",
-                _fmt(kp),
+                flow(kp),
                 f"{why}: docs/robots.md's 3000 (shoulder, elbow) and 800 (wrist) for a "
                 f"moving mass of {mass:.1f} kg (scaled below {BIG_MASS:g} kg)",
             )
@@ -243,10 +221,10 @@ def read_arm(path: Path, where: Path, guesses: list[Guess]) -> _Arm:
         acts = []
     else:
         guesses.append(
-            Guess("arm.actuators", _fmt(acts), "the position actuator on each chain joint")
+            Guess("arm.actuators", flow(acts), "the position actuator on each chain joint")
         )
     mount = _mount(m, chain, guesses)
-    return _Arm(path, m, chain, names, acts, servo, fl, mount)
+    return ArmFound(path, m, chain, names, acts, servo, fl, mount)
 
 
 def _mount(m: mujoco.MjModel, chain: list[int], guesses: list[Guess]) -> Frame | None:
@@ -276,7 +254,7 @@ def _mount(m: mujoco.MjModel, chain: list[int], guesses: list[Guess]) -> Frame |
     guesses.append(
         Guess(
             "mount",
-            f"pos {_fmt(pos)}, yaw {math.degrees(-heading):.0f} deg",
+            f"pos {flow(pos)}, yaw {math.degrees(-heading):.0f} deg",
             f"the first joint's axis is at ({anchor[0]:.3f}, {anchor[1]:.3f}) and the arm "
             f"reaches {math.degrees(heading):.0f} deg from +x at zero; the controller wants "
             "the axis at the origin reaching along +x",
@@ -285,7 +263,7 @@ def _mount(m: mujoco.MjModel, chain: list[int], guesses: list[Guess]) -> Frame |
     return Frame(tuple(round(p, 6) for p in pos), quat)  # type: ignore[arg-type]
 
 
-def _compose(arm: _Arm, gripper: Path | None, where: Path, **extra: object) -> mujoco.MjSpec:
+def compose(arm: ArmFound, gripper: Path | None, where: Path, **extra: object) -> mujoco.MjSpec:
     g = None
     if gripper is not None:
         g = GripperFile(

@@ -15,14 +15,14 @@ from smccli.world.robot_import_arm import (
     PINCH_SITE,
     PREFIX,
     SETTLE,
+    ArmFound,
     Guess,
-    _actuators_on,
-    _Arm,
-    _bad,
-    _compose,
-    _fmt,
-    _name,
-    _subtree,
+    actuators_on,
+    bad_file,
+    compose,
+    flow,
+    name_of,
+    subtree,
 )
 
 PAD_DEPTH = 0.02
@@ -32,7 +32,7 @@ SITE_NEAR = 0.03
 
 
 @dataclass(frozen=True, slots=True)
-class _Hand:
+class HandFound:
     """The gripper as found in the composed model."""
 
     joints: list[str]
@@ -44,17 +44,17 @@ class _Hand:
     poi: Frame
 
 
-def _finger_joints(m: mujoco.MjModel, arm: _Arm, separate: bool) -> set[int]:
+def _finger_joints(m: mujoco.MjModel, arm: ArmFound, separate: bool) -> set[int]:
     last = int(m.jnt_bodyid[m.joint(arm.names[-1]).id])
-    below = _subtree(m, last)
+    below = subtree(m, last)
     kinds = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
     return {
         j
         for j in range(m.njnt)
         if int(m.jnt_bodyid[j]) in below
         and int(m.jnt_type[j]) in kinds
-        and _name(m, mujoco.mjtObj.mjOBJ_JOINT, j) not in arm.names
-        and (not separate or _name(m, mujoco.mjtObj.mjOBJ_JOINT, j).startswith(PREFIX))
+        and name_of(m, mujoco.mjtObj.mjOBJ_JOINT, j) not in arm.names
+        and (not separate or name_of(m, mujoco.mjtObj.mjOBJ_JOINT, j).startswith(PREFIX))
     }
 
 
@@ -109,7 +109,7 @@ def _tip(
 
 
 def _drive_ends(
-    m: mujoco.MjModel, arm: _Arm, act: int, ends: tuple[float, float]
+    m: mujoco.MjModel, arm: ArmFound, act: int, ends: tuple[float, float]
 ) -> list[mujoco.MjData]:
     """The gripper driven to each end of ``ends``, the arm held at zero (clipped to its
     limits), without gravity: the settled states (kinematics computed)."""
@@ -132,41 +132,41 @@ def _driven(m: mujoco.MjModel, act: int) -> tuple[list[int], str]:
     """The joints actuator ``act`` moves (its joint, or its tendon's) and how it says so."""
     if m.actuator_trntype[act] == mujoco.mjtTrn.mjTRN_JOINT:
         j = int(m.actuator_trnid[act, 0])
-        return [j], f"joint {_name(m, mujoco.mjtObj.mjOBJ_JOINT, j)!r}"
+        return [j], f"joint {name_of(m, mujoco.mjtObj.mjOBJ_JOINT, j)!r}"
     t = int(m.actuator_trnid[act, 0])
     adr, n = int(m.tendon_adr[t]), int(m.tendon_num[t])
     joints = [int(m.wrap_objid[w]) for w in range(adr, adr + n)]
-    return joints, f"tendon {_name(m, mujoco.mjtObj.mjOBJ_TENDON, t)!r}"
+    return joints, f"tendon {name_of(m, mujoco.mjtObj.mjOBJ_TENDON, t)!r}"
 
 
 def _find_actuator(
-    m: mujoco.MjModel, arm: _Arm, gripper: Path | None, source: Path
+    m: mujoco.MjModel, arm: ArmFound, gripper: Path | None, source: Path
 ) -> tuple[int, list[tuple[str, str, float]]]:
     """The gripper's actuator and the fingers to couple to its joint (those driven by an
     actuator of their own)."""
     fingers = _finger_joints(m, arm, gripper is not None)
-    acts = _actuators_on(m, fingers)
+    acts = actuators_on(m, fingers)
     if not fingers or not acts:
         what = "no finger joint" if not fingers else "no actuator on its finger joints"
         hint = "" if gripper is not None else "; give the gripper's own file with --gripper"
-        raise _bad(source, f"{what} below the arm's flange (no gripper found){hint}")
+        raise bad_file(source, f"{what} below the arm's flange (no gripper found){hint}")
     couple = []
     for other in acts[1:]:
         if m.actuator_trntype[other] == mujoco.mjtTrn.mjTRN_JOINT:
             j, to = int(m.actuator_trnid[other, 0]), int(m.actuator_trnid[acts[0], 0])
-            name = lambda k: _name(m, mujoco.mjtObj.mjOBJ_JOINT, k)  # noqa: E731
+            name = lambda k: name_of(m, mujoco.mjtObj.mjOBJ_JOINT, k)  # noqa: E731
             couple.append((name(j), name(to), _ratio(m, j, to)))
     return acts[0], couple
 
 
-def read_hand(arm: _Arm, gripper: Path | None, where: Path, guesses: list[Guess]) -> _Hand:
+def read_hand(arm: ArmFound, gripper: Path | None, where: Path, guesses: list[Guess]) -> HandFound:
     """The gripper's joints, actuator, commands and POI, found in the composed model."""
     source = gripper or arm.path
-    m = _compose(arm, gripper, where).compile()
+    m = compose(arm, gripper, where).compile()
     act, couple = _find_actuator(m, arm, gripper, source)
-    act_name = _name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, act)
+    act_name = name_of(m, mujoco.mjtObj.mjOBJ_ACTUATOR, act)
     if couple:  # the coupled fingers' actuators are left out: ids change
-        m = _compose(arm, gripper, where, couple=tuple(couple)).compile()
+        m = compose(arm, gripper, where, couple=tuple(couple)).compile()
         act = m.actuator(act_name).id
     driven, through = _driven(m, act)
     lo, hi = m.actuator_ctrlrange[act] if m.actuator_ctrllimited[act] else m.jnt_range[driven[0]]
@@ -177,17 +177,17 @@ def read_hand(arm: _Arm, gripper: Path | None, where: Path, guesses: list[Guess]
     joints = [j for j, t in zip(driven, travel, strict=True) if abs(t) > 0.5 * abs(travel[0])]
     # The sides: collision geoms the finger joints move, split by the way they move.
     fingers = _finger_joints(m, arm, gripper is not None)
-    moving = set().union(*(_subtree(m, int(m.jnt_bodyid[j])) for j in fingers))
+    moving = set().union(*(subtree(m, int(m.jnt_bodyid[j])) for j in fingers))
     geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in moving and _collides(m, g)]
     if not geoms:
-        raise _bad(source, "its fingers have no collision geoms (no pads to grip with)")
+        raise bad_file(source, "its fingers have no collision geoms (no pads to grip with)")
     disp = np.array([data[1].geom_xpos[g] - data[0].geom_xpos[g] for g in geoms])
     u = np.linalg.svd(disp)[2][0]
     sign = disp @ u
     side_a = [g for g, s in zip(geoms, sign, strict=True) if s > 1e-4]
     side_b = [g for g, s in zip(geoms, sign, strict=True) if s < -1e-4]
     last = m.joint(arm.names[-1]).id
-    hand = _subtree(m, int(m.jnt_bodyid[last]))
+    hand = subtree(m, int(m.jnt_bodyid[last]))
     one_jaw = not side_a or not side_b
     if one_jaw:  # the fixed jaw: the hand's own collision geoms
         side_a = side_a or side_b
@@ -195,7 +195,7 @@ def read_hand(arm: _Arm, gripper: Path | None, where: Path, guesses: list[Guess]
             g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in hand - moving and _collides(m, g)
         ]
         if not side_b:
-            raise _bad(
+            raise bad_file(
                 source, "one finger moves and the hand has no collision geom to grip against"
             )
     d0 = data[0]
@@ -213,7 +213,7 @@ def read_hand(arm: _Arm, gripper: Path | None, where: Path, guesses: list[Guess]
     coupled = (
         "; coupled: " + ", ".join(f"{j} = {r:g} x {t}" for j, t, r in couple) if couple else ""
     )
-    jname = _name(m, mujoco.mjtObj.mjOBJ_JOINT, joints[0])
+    jname = name_of(m, mujoco.mjtObj.mjOBJ_JOINT, joints[0])
     guesses += [
         Guess(
             "gripper.actuator",
@@ -222,20 +222,20 @@ def read_hand(arm: _Arm, gripper: Path | None, where: Path, guesses: list[Guess]
         ),
         Guess(
             "gripper.commands",
-            _fmt(commands),
+            flow(commands),
             f"driven to {ends[0]:g} and {ends[1]:g} for {SETTLE:g} s: the pads "
             f"{gaps[0] * 1000:.0f} and {gaps[1] * 1000:.0f} mm apart; the wider end opens",
         ),
         Guess(
             "gripper.opening",
-            _fmt([round(v, 4) for v in opening]),
+            flow([round(v, 4) for v in opening]),
             f"{jname} settled there (closed, open)",
         ),
     ]
     # Closed, the tips reach furthest (a hinged jaw swings out open): the pads there.
     at, poi = _poi(m, data[closed_i], pads[closed_i], a, u, hand, arm.names[-1], guesses)
-    names = [_name(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints]
-    return _Hand(names, act_name, tuple(couple), commands, opening, at, poi)
+    names = [name_of(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints]
+    return HandFound(names, act_name, tuple(couple), commands, opening, at, poi)
 
 
 def _poi(
@@ -257,26 +257,26 @@ def _poi(
         (
             s
             for s in range(m.nsite)
-            if PINCH_SITE.search(_name(m, mujoco.mjtObj.mjOBJ_SITE, s))
+            if PINCH_SITE.search(name_of(m, mujoco.mjtObj.mjOBJ_SITE, s))
             and int(m.site_bodyid[s]) in hand
             and np.linalg.norm(d.site_xpos[s] - mid) < SITE_NEAR
         ),
-        key=lambda s: (len(_name(m, mujoco.mjtObj.mjOBJ_SITE, s)), s),
+        key=lambda s: (len(name_of(m, mujoco.mjtObj.mjOBJ_SITE, s)), s),
     )
     if sites:
-        at = _name(m, mujoco.mjtObj.mjOBJ_SITE, sites[0])
+        at = name_of(m, mujoco.mjtObj.mjOBJ_SITE, sites[0])
         p_at, r_at = d.site_xpos[sites[0]], d.site_xmat[sites[0]].reshape(3, 3)
         point = p_at
         off = np.linalg.norm(p_at - mid) * 1000
         why = f"the gripper's own site {at!r}, {off:.0f} mm from the pads' midpoint"
     else:
         body = int(m.jnt_bodyid[m.joint(roll).id])
-        at = _name(m, mujoco.mjtObj.mjOBJ_BODY, body)
+        at = name_of(m, mujoco.mjtObj.mjOBJ_BODY, body)
         p_at, r_at = d.xpos[body], d.xmat[body].reshape(3, 3)
         point = mid
         pad = [
-            _name(m, mujoco.mjtObj.mjOBJ_GEOM, g)
-            or f"a geom of body {_name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.geom_bodyid[g]))}"
+            name_of(m, mujoco.mjtObj.mjOBJ_GEOM, g)
+            or f"a geom of body {name_of(m, mujoco.mjtObj.mjOBJ_BODY, int(m.geom_bodyid[g]))}"
             for g, _ in pads
         ]
         why = f"the midpoint of the pads nearest the fingertips ({pad[0]}, {pad[1]})"
@@ -289,5 +289,5 @@ def _poi(
         tuple(round(float(v), 6) + 0.0 for v in quat),  # type: ignore[arg-type]
     )
     why += f"; z along {roll}'s axis out of the fingers, y along the finger travel"
-    guesses.append(Guess("poi", f"at {at}, pos {_fmt(frame.pos)}", why))
+    guesses.append(Guess("poi", f"at {at}, pos {flow(frame.pos)}", why))
     return at, frame
