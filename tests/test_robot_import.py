@@ -251,3 +251,27 @@ def test_urdf_panda_gives_the_same_robot_as_the_hand_written_urdf_file(
     theirs = _poi_at(twin)
     assert np.linalg.norm(ours[0] - theirs[0]) < 0.005, (ours, theirs)
     assert ours[1] @ theirs[1] > 0.999
+
+
+@pytest.mark.slow
+def test_drafted_ur5e_records_compiles_and_replays(vendor_models: Path, tmp_path: Path) -> None:
+    """The drafted UR5e with the xArm tendon gripper, as `smc robots import` wrote it,
+    records the bench_pick demonstration (tests/scenes/vendor_ur5e_pick/demo.yaml), compiles,
+    and its tree succeeds in 8 or more of 10 layouts (measured: 10/10)."""
+    gripper = _without_default_group(vendor_models, tmp_path / "xarm")
+    out = tmp_path / "ur5e"
+    arm = vendor_models / RS / "robots" / "ur5e" / "robot.xml"
+    code, stdout, stderr = _import(arm, "--gripper", gripper, "-o", out)
+    assert code == 0, stdout + stderr
+    scene = _scene_with(out / "robot.yaml", tmp_path / "scene")
+    demo = tmp_path / "scene" / "demo.yaml"
+    demo.write_text((TESTS / "scenes" / "vendor_ur5e_pick" / "demo.yaml").read_text())
+    log, tree = tmp_path / "demo.mcap", tmp_path / "tree.json"
+    proc = smc("record", "--scene", scene, "--script", demo, "-o", log, timeout=900)
+    assert proc.returncode == 0 and "task achieved" in proc.stdout, proc.stdout + proc.stderr
+    proc = smc("compile", log, "-o", tree)
+    assert proc.returncode == 0, proc.stderr
+    proc = smc("replay", tree, "--trials", "10", "--seed", "3", "--workers", "1", timeout=1800)
+    assert proc.returncode == 0, proc.stderr
+    m = re.search(r"(\d+)/10 succeeded", proc.stdout)
+    assert m and int(m.group(1)) >= 8, proc.stdout
