@@ -254,13 +254,21 @@ def test_urdf_panda_gives_the_same_robot_as_the_hand_written_urdf_file(
 
 
 @pytest.mark.slow
-def test_drafted_ur5e_records_compiles_and_replays(vendor_models: Path, tmp_path: Path) -> None:
-    """The drafted UR5e with the xArm tendon gripper, as `smc robots import` wrote it,
-    records the bench_pick demonstration (tests/scenes/vendor_ur5e_pick/demo.yaml), compiles,
-    and its tree succeeds in 8 or more of 10 layouts (measured: 10/10)."""
-    gripper = _without_default_group(vendor_models, tmp_path / "xarm")
-    out = tmp_path / "ur5e"
-    arm = vendor_models / RS / "robots" / "ur5e" / "robot.xml"
+@pytest.mark.parametrize("robot", ["ur5e_xarm", "panda"])
+def test_drafted_robot_records_compiles_and_replays(
+    vendor_models: Path, tmp_path: Path, robot: str
+) -> None:
+    """A drafted robot, as `smc robots import` wrote it (the UR5e with the xArm tendon
+    gripper; the Panda with its hand, both files as shipped), records the bench_pick
+    demonstration (tests/scenes/vendor_ur5e_pick/demo.yaml), compiles, and its tree
+    succeeds in 8 or more of 10 layouts (measured: 10/10 each)."""
+    if robot == "panda":
+        arm = vendor_models / RS / "robots" / "panda" / "robot.xml"
+        gripper = vendor_models / RS / "grippers" / "panda_gripper.xml"
+    else:
+        arm = vendor_models / RS / "robots" / "ur5e" / "robot.xml"
+        gripper = _without_default_group(vendor_models, tmp_path / "xarm")
+    out = tmp_path / robot
     code, stdout, stderr = _import(arm, "--gripper", gripper, "-o", out)
     assert code == 0, stdout + stderr
     scene = _scene_with(out / "robot.yaml", tmp_path / "scene")
