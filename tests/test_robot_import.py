@@ -69,8 +69,15 @@ def test_panda_with_its_hand_is_drafted_like_the_hand_written_file(
         vendor_models / RS / "grippers" / "panda_gripper.xml",
         "-o",
         out,
+        "--scene",
+        "bench_pick",
     )
     assert code == 0, stdout + stderr
+    # Checked in a copy of the scene holding the draft: home out of view, ranges reached.
+    assert (out / "scene.yaml").is_file() and "robot: robot.yaml" in (
+        out / "scene.yaml"
+    ).read_text()
+    assert re.search(r"home_view +│ pass", stdout) and re.search(r"reach +│ pass", stdout), stdout
     for what in ("arm.joints", "arm.servo.kp", "gripper.actuator", "poi", "arm.home"):
         assert what in stdout
     drafted = yaml.safe_load((out / "robot.yaml").read_text())
@@ -85,8 +92,7 @@ def test_panda_with_its_hand_is_drafted_like_the_hand_written_file(
     theirs = _poi_at(TESTS / "robots" / "vendor_panda" / "robot.yaml")
     assert np.linalg.norm(ours[0] - theirs[0]) < 0.005, (ours, theirs)
     assert ours[1] @ theirs[1] > 0.999
-    scene = _scene_with(out / "robot.yaml", tmp_path / "scene")
-    proc = smc("robots", "--scene", scene, timeout=600)
+    proc = smc("robots", "--scene", out / "scene.yaml", timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "100% of" in proc.stdout
     assert _digests(vendor_models / RS) == before
@@ -269,10 +275,10 @@ def test_drafted_robot_records_compiles_and_replays(
         arm = vendor_models / RS / "robots" / "ur5e" / "robot.xml"
         gripper = _without_default_group(vendor_models, tmp_path / "xarm")
     out = tmp_path / robot
-    code, stdout, stderr = _import(arm, "--gripper", gripper, "-o", out)
+    code, stdout, stderr = _import(arm, "--gripper", gripper, "-o", out, "--scene", "bench_pick")
     assert code == 0, stdout + stderr
-    scene = _scene_with(out / "robot.yaml", tmp_path / "scene")
-    demo = tmp_path / "scene" / "demo.yaml"
+    scene = out / "scene.yaml"
+    demo = out / "demo.yaml"
     demo.write_text((TESTS / "scenes" / "vendor_ur5e_pick" / "demo.yaml").read_text())
     log, tree = tmp_path / "demo.mcap", tmp_path / "tree.json"
     proc = smc("record", "--scene", scene, "--script", demo, "-o", log, timeout=900)

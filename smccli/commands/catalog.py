@@ -48,7 +48,8 @@ def robots(
         str | None,
         typer.Option(
             help="Check the robot of this scene (built-in name or scene.yaml) in it: its "
-            "object ranges and its camera too.",
+            "object ranges and its camera too. With `import`: a copy holding the drafted "
+            "robot is written to DIR/scene.yaml and the draft checked in it.",
         ),
     ] = None,
     gripper: Annotated[
@@ -150,14 +151,22 @@ def _import(
     args: list[Path], gripper: Path | None, output: Path | None, force: bool, scene: str | None
 ) -> None:
     """``smc robots import``: draft, write, print the guesses, run the checks."""
+    from smccli.outputs import check_output, write_atomic
     from smccli.world.robot import load_robot
-    from smccli.world.robot_import import draft_robot, write_draft
+    from smccli.world.robot_import import draft_robot, scene_text, write_draft
     from smccli.world.scene import load_scene
 
     if len(args) != 1 or output is None:
         raise typer.BadParameter("usage: smc robots import ARM [--gripper GRIPPER] -o DIR")
+    copy = scene_text(scene, output) if scene is not None else None
     draft = draft_robot(args[0], gripper, output)
+    if copy is not None:  # both refused before either is written
+        output.mkdir(parents=True, exist_ok=True)
+        check_output(output / "scene.yaml", force=force)
     path = write_draft(draft, output, force=force)
+    if copy is not None:
+        scene = str(write_atomic(output / "scene.yaml", copy))
+        out.print(f"{escape(scene)}: a copy of the scene holding the drafted robot")
     table = Table("what", "value", "why", title=f"{escape(str(path))}: what was guessed")
     for g in draft.guesses:
         table.add_row(escape(g.what), escape(g.value), escape(g.why))

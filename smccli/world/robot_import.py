@@ -33,12 +33,14 @@ file). What it guesses, in order:
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import mujoco
 import numpy as np
 from scipy.optimize import least_squares
 
+from smccli.errors import SceneError
 from smccli.outputs import check_output, write_atomic
 from smccli.world.robot_compose import POI_SITE, PoiPlacement
 from smccli.world.robot_import_arm import (
@@ -208,3 +210,26 @@ def write_draft(draft: Draft, out_dir: Path, *, force: bool) -> Path:
     out_dir.mkdir(parents=True, exist_ok=True)
     path = check_output(out_dir / "robot.yaml", force=force)
     return write_atomic(path, draft.text)
+
+
+def scene_text(scene_ref: str, out_dir: Path) -> str:
+    """A copy of the scene file ``scene_ref`` (a built-in name or a path) for DIR: its
+    ``robot:`` the drafted ``robot.yaml`` beside it, its ``mjcf:`` the scene's own MJCF
+    (relative to DIR); the rest, comments included, as written."""
+    from smccli.world.scene import SCENES_DIR, builtin_names
+    from smccli.world.scene_file import read_scene_yaml
+
+    path = (
+        SCENES_DIR / scene_ref / "scene.yaml" if scene_ref in builtin_names() else Path(scene_ref)
+    )
+    if not path.is_file():
+        raise SceneError(f"{scene_ref}: no such scene (a built-in name or a scene.yaml)")
+    text = path.read_text()
+    raw = read_scene_yaml(text, str(path))
+    mjcf = _rel(path.parent / str(raw.get("mjcf", "scene.xml")), out_dir)
+    for key, value in (("mjcf", mjcf), ("robot", "robot.yaml")):
+        line = f"{key}: {value}"
+        text, n = re.subn(rf"^{key}:.*$", line, text, count=1, flags=re.MULTILINE)
+        if not n:
+            text = text.rstrip("\n") + f"\n{line}\n"
+    return text
