@@ -25,7 +25,10 @@ FINGER_NAME = re.compile(r"grip|finger|jaw|claw", re.IGNORECASE)
 """A joint named like this is the gripper's, not the arm's."""
 PINCH_SITE = re.compile(r"grip|pinch|tcp", re.IGNORECASE)
 """A site named like this is the gripper's own point between the pads."""
-FLANGE_NAME = re.compile(r"hand|flange|attach|tool|ee", re.IGNORECASE)
+FLANGE_NAME = re.compile(r"hand|flange|attach|tool|(^|_)ee($|_)", re.IGNORECASE)
+"""A joint-less body named like this, below the last arm joint, is the flange."""
+ATTACH_SITE = re.compile(r"attach|flange", re.IGNORECASE)
+"""A site of the flange body named like this is where the gripper attaches."""
 SETTLE = 2.0
 """How long the gripper is driven to each end of its range [s]."""
 KP_BIG, KP_WRIST = 3000.0, 800.0
@@ -101,7 +104,8 @@ def arm_chain(m: mujoco.MjModel, path: Path) -> list[int]:
 
 def flange(m: mujoco.MjModel, last_body: int) -> str:
     """Where a separate gripper attaches: the last arm body's joint-less descendant along
-    single children (robosuite's ``right_hand``), else the last arm body."""
+    single children (robosuite's ``right_hand``), else the last arm body; a site of that
+    body named like attach or flange where it has one."""
     b = last_body
     while True:
         kids = [
@@ -112,11 +116,18 @@ def flange(m: mujoco.MjModel, last_body: int) -> str:
         named = [c for c in kids if FLANGE_NAME.search(name_of(m, mujoco.mjtObj.mjOBJ_BODY, c))]
         pick = named or (kids if len(kids) == 1 else [])
         if not pick:
-            return name_of(m, mujoco.mjtObj.mjOBJ_BODY, b)
+            break
         b = pick[0]
+    sites = [  # a site made for it (Menagerie's attachment_site)
+        name_of(m, mujoco.mjtObj.mjOBJ_SITE, s)
+        for s in range(m.nsite)
+        if m.site_bodyid[s] == b and ATTACH_SITE.search(name_of(m, mujoco.mjtObj.mjOBJ_SITE, s))
+    ]
+    return sites[0] if sites else name_of(m, mujoco.mjtObj.mjOBJ_BODY, b)
 
 
 def subtree(m: mujoco.MjModel, root: int) -> set[int]:
+    """Body ``root`` and its descendants."""
     out = set()
     for b in range(m.nbody):
         a = b

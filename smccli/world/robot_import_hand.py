@@ -25,8 +25,11 @@ from smccli.world.robot_import_arm import (
     subtree,
 )
 
-PAD_DEPTH = 0.02
-"""A mesh pad's points this near its tip along the approach make its pad point [m]."""
+PAD_DEPTH = 0.04
+"""The stretch of a finger next to its tip that grips, along the approach [m]: its middle,
+2 cm from the tip, is where the hand-written built-in robots put their POI within 5 mm
+(the arm and six 1.5 cm from their 9 cm fingers' tips, the Panda at its 4.5 cm pads'
+centre)."""
 SITE_NEAR = 0.03
 """A pinch site this near the pads' midpoint is the POI [m]."""
 
@@ -86,26 +89,34 @@ def _collides(m: mujoco.MjModel, g: int) -> bool:
     return bool(m.geom_contype[g] or m.geom_conaffinity[g])
 
 
-def _points(m: mujoco.MjModel, d: mujoco.MjData, g: int) -> np.ndarray:
-    """A geom's points in the world [m], shape (k, 3): a mesh's vertices, else its centre."""
+def _pad_point(m: mujoco.MjModel, d: mujoco.MjData, g: int, a: np.ndarray) -> np.ndarray:
+    """Where a geom grips, its last PAD_DEPTH along the approach ``a`` [m] (world frame):
+    a mesh's vertices there, averaged; a primitive's centre moved out to the middle of
+    that stretch (a long finger grips near its tip, a short pad at its centre)."""
     mesh = int(m.geom_dataid[g])
-    if m.geom_type[g] != mujoco.mjtGeom.mjGEOM_MESH or mesh < 0:
-        return d.geom_xpos[g][None, :].copy()
-    adr, n = int(m.mesh_vertadr[mesh]), int(m.mesh_vertnum[mesh])
-    local = m.mesh_vert[adr : adr + n]
-    return d.geom_xpos[g] + local @ d.geom_xmat[g].reshape(3, 3).T
+    xmat = d.geom_xmat[g].reshape(3, 3)
+    if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH and mesh >= 0:
+        adr, n = int(m.mesh_vertadr[mesh]), int(m.mesh_vertnum[mesh])
+        p = d.geom_xpos[g] + m.mesh_vert[adr : adr + n] @ xmat.T
+        depth = p @ a
+        return p[depth >= depth.max() - PAD_DEPTH].mean(axis=0)
+    reach = float(np.abs(xmat.T @ a) @ m.geom_aabb[g, 3:])  # centre to tip along a
+    return d.geom_xpos[g] + a * max(0.0, reach - PAD_DEPTH / 2)
+
+
+def _tip_depth(m: mujoco.MjModel, d: mujoco.MjData, g: int, a: np.ndarray) -> float:
+    """How far along ``a`` a geom reaches (its bounding box's extent) [m]."""
+    xmat = d.geom_xmat[g].reshape(3, 3)
+    centre = d.geom_xpos[g] + xmat @ m.geom_aabb[g, :3]
+    return float(centre @ a + np.abs(xmat.T @ a) @ m.geom_aabb[g, 3:])
 
 
 def _tip(
     m: mujoco.MjModel, d: mujoco.MjData, side: list[int], a: np.ndarray
 ) -> tuple[int, np.ndarray]:
-    """The side's geom reaching furthest along the approach ``a`` and its pad point: a
-    primitive's centre, a mesh's points within PAD_DEPTH of its tip, averaged."""
-    pts = {g: _points(m, d, g) for g in side}
-    g = max(side, key=lambda k: float((pts[k] @ a).max()))
-    p = pts[g]
-    depth = p @ a
-    return g, p[depth >= depth.max() - PAD_DEPTH].mean(axis=0)
+    """The side's geom reaching furthest along the approach ``a`` and its pad point."""
+    g = max(side, key=lambda k: _tip_depth(m, d, k, a))
+    return g, _pad_point(m, d, g, a)
 
 
 def _drive_ends(
