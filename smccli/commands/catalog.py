@@ -48,17 +48,38 @@ def robots(
         str | None,
         typer.Option(
             help="Check the robot of this scene (built-in name or scene.yaml) in it: its "
-            "object ranges and its camera too.",
+            "object ranges and its camera too. With `import`: a copy holding the drafted "
+            "robot is written to DIR/scene.yaml and the draft checked in it.",
         ),
     ] = None,
+    gripper: Annotated[
+        Path | None,
+        typer.Option(help="`smc robots import ARM`: the gripper's own MJCF, if separate."),
+    ] = None,
+    output: Annotated[
+        Path | None,
+        typer.Option("--output", "-o", help="`smc robots import ARM`: the folder to write."),
+    ] = None,
+    force: Annotated[
+        bool, typer.Option(help="`smc robots import`: overwrite DIR/robot.yaml.")
+    ] = False,
 ) -> None:
     """List the built-in robots (and check your own): degrees of freedom, gripper, sensors.
 
     A robot file given, or a scene's robot, is also run in simulation (gripper, home
-    posture, reach, POI); exit 2 when a check fails."""
+    posture, reach, POI); exit 2 when a check fails.
+
+    `smc robots import ARM [--gripper GRIPPER] -o DIR` drafts DIR/robot.yaml for a
+    vendor's arm (MJCF or URDF) and gripper (MJCF), never editing them, prints what it
+    guessed and why, then checks the draft as above."""
     from smccli.world.robot import list_robots, load_robot
     from smccli.world.scene import load_scene
 
+    if files and files[0] == Path("import"):
+        _import(files[1:], gripper, output, force, scene)
+        return
+    if gripper is not None or output is not None:
+        raise typer.BadParameter("--gripper and -o are for `smc robots import ARM`")
     mine = [load_robot(f) for f in files or []]
     in_scene = load_scene(scene) if scene is not None else None
     found = list_robots() + mine
@@ -124,3 +145,36 @@ def _simulation_checks(robot: Robot, scene: Scene | None) -> list[str]:
             )
             lines.append(f"{file}: {f.check}: {f.measured}; {f.fix}")
     return lines
+
+
+def _import(
+    args: list[Path], gripper: Path | None, output: Path | None, force: bool, scene: str | None
+) -> None:
+    """``smc robots import``: draft, write, print the guesses, run the checks."""
+    from smccli.outputs import check_output, write_atomic
+    from smccli.world.robot import load_robot
+    from smccli.world.robot_import import draft_robot, scene_text, write_draft
+    from smccli.world.scene import load_scene
+
+    if len(args) != 1 or output is None:
+        raise typer.BadParameter("usage: smc robots import ARM [--gripper GRIPPER] -o DIR")
+    copy = scene_text(scene, output) if scene is not None else None
+    draft = draft_robot(args[0], gripper, output)
+    if copy is not None:  # both refused before either is written
+        output.mkdir(parents=True, exist_ok=True)
+        check_output(output / "scene.yaml", force=force)
+    path = write_draft(draft, output, force=force)
+    if copy is not None:
+        scene = str(write_atomic(output / "scene.yaml", copy))
+        out.print(f"{escape(scene)}: a copy of the scene holding the drafted robot")
+    table = Table("what", "value", "why", title=f"{escape(str(path))}: what was guessed")
+    for g in draft.guesses:
+        table.add_row(escape(g.what), escape(g.value), escape(g.why))
+    out.print(table)
+    robot = load_robot(path)
+    where = load_scene(scene) if scene is not None else None
+    failed = _simulation_checks(robot, where)
+    for line in failed:
+        err.print(f"[bold red]error:[/] {one_line(line)}", highlight=False, soft_wrap=True)
+    if failed:
+        raise typer.Exit(2)
