@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import sys
+import warnings
 from pathlib import Path
 from typing import Annotated
 
@@ -17,7 +18,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from smccli.commands import catalog, compile, doctor, export, inspect, record, replay, verify
-from smccli.commands.console import err, one_line, out, say
+from smccli.commands.console import err, one_line, out, say, warn
 from smccli.errors import SmcError
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -96,8 +97,20 @@ def topics_command(
 app.command()(export.export)
 
 
+_WARNED: set[str] = set()
+
+
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
+    """A Python warning as smc's own ``warning: ...`` line (not Python's two lines), once:
+    a model composed several times warns each time."""
+    if str(message) not in _WARNED:
+        _WARNED.add(str(message))
+        warn(str(message))
+
+
 def main() -> None:
     """Entry point: run the app; expected failures become one line and an exit code."""
+    warnings.showwarning = _one_line_warning
     try:
         app()
     except SmcError as exc:

@@ -17,6 +17,7 @@ import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from xml.etree import ElementTree
 
 import mujoco
 import numpy as np
@@ -136,6 +137,48 @@ def _urdf_text(urdf: Path, robot_dir: Path) -> str:
     return text
 
 
+_UNKNOWN_ATTRIBUTE = re.compile(r"unrecognized attribute: '([^']+)'\s+Element '([^']+)'")
+"""MuJoCo's parse error for an attribute its schema does not have on an element."""
+_MAX_DROPPED = 16
+
+
+def _mjcf_spec(path: Path) -> mujoco.MjSpec:
+    """An MJCF file as a spec. An attribute MuJoCo's schema does not know on an element
+    (robosuite 1.5.2's xArm gripper puts ``group`` on a ``<default>``: older MuJoCo let it
+    pass) is dropped from every such element, with a warning naming the file, rather than
+    the vendor's file refused: it never meant anything to MuJoCo."""
+    try:
+        return mujoco.MjSpec.from_file(str(path))
+    except ValueError as exc:
+        first = exc
+    root = ElementTree.parse(path).getroot()
+    dropped: list[str] = []
+    while len(dropped) < _MAX_DROPPED:
+        m = _UNKNOWN_ATTRIBUTE.search(str(first))
+        if m is None:
+            raise first
+        attr, tag = m.groups()
+        hits = [e for e in root.iter(tag) if attr in e.attrib]
+        if not hits:
+            raise first
+        for e in hits:
+            del e.attrib[attr]
+        dropped.append(f"{attr!r} on <{tag}>")
+        try:
+            spec = mujoco.MjSpec.from_string(ElementTree.tostring(root, encoding="unicode"))
+        except ValueError as exc:
+            first = exc
+            continue
+        spec.modelfiledir = str(path.parent)
+        warnings.warn(
+            f"{path}: MuJoCo {mujoco.__version__} does not know {', '.join(dropped)}: "
+            "left out (the file is not changed)",
+            stacklevel=2,
+        )
+        return spec
+    raise first
+
+
 def _load(path: Path, robot_dir: Path) -> mujoco.MjSpec:
     """One file as a spec whose asset files are absolute paths (from its own folder)."""
     try:
@@ -143,7 +186,7 @@ def _load(path: Path, robot_dir: Path) -> mujoco.MjSpec:
             spec = mujoco.MjSpec.from_string(_urdf_text(path, robot_dir))
             spec.modelfiledir = str(path.parent)
         else:
-            spec = mujoco.MjSpec.from_file(str(path))
+            spec = _mjcf_spec(path)
     except ValueError as exc:
         raise SceneError(f"{path}: MuJoCo rejects the file: {' '.join(str(exc).split())}") from None
     folder = Path(spec.modelfiledir or path.parent)
