@@ -82,5 +82,4 @@ def fetch(target: Path = VENDOR_DIR) -> list[Path]:
 
 
 if __name__ == "__main__":
-    for folder in fetch():
-        print(folder)
+    fetch()
