@@ -14,6 +14,7 @@ from pathlib import Path
 
 _BLOCK = re.compile(r"^```(\w*)\n(.*?)^```", re.DOTALL | re.MULTILINE)
 _FILE = re.compile(r"^(?:#|<!--)\s*file:\s*(\S+?)\s*(?:-->)?$")
+_VAR = re.compile(r"\$([A-Z_][A-Z0-9_]*)")
 
 
 def guide_files(guide: Path) -> dict[str, str]:
@@ -28,12 +29,20 @@ def guide_files(guide: Path) -> dict[str, str]:
     return files
 
 
-def guide_commands(guide: Path) -> list[list[str]]:
-    """The argument lists of every ``$ `` line of the guide's ``console`` blocks, in order."""
+def guide_commands(guide: Path, env: dict[str, str] | None = None) -> list[list[str]]:
+    """The argument lists of every ``$ `` line of the guide's ``console`` blocks, in order,
+    ``$NAME`` replaced by ``env[NAME]`` as the reader's shell would (a variable the guide
+    asks the reader to set)."""
+    env = env or {}
+
+    def expand(word: str) -> str:
+        return _VAR.sub(lambda m: env[m.group(1)], word)
+
     commands = []
     for lang, body in _BLOCK.findall(guide.read_text(encoding="utf-8")):
         if lang == "console":
-            commands += [shlex.split(line[2:]) for line in body.splitlines() if line[:2] == "$ "]
+            lines = [line[2:] for line in body.splitlines() if line[:2] == "$ "]
+            commands += [[expand(w) for w in shlex.split(line)] for line in lines]
     return commands
 
 
