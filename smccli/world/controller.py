@@ -342,8 +342,7 @@ class CartesianController:
     ) -> float:
         """:meth:`yaw_subgoal`'s yaw at the kinematics last set, the joints' first and last
         at ``q_first``, ``q_last_now``; sets the branch the posture pull takes."""
-        xmat = self._site_xmat
-        yaw = math.atan2(xmat[3], xmat[0])  # geometry.yaw_of
+        yaw = yaw_of(self._site_xmat)
         q1, branches = aim
         d = wrap(target_yaw - yaw)
         q_last, off = branches[0], abs(branches[0] - q_last_now)
