@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import re
 import shlex
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 _BLOCK = re.compile(r"^```(\w*)\n(.*?)^```", re.DOTALL | re.MULTILINE)
 _FILE = re.compile(r"^(?:#|<!--)\s*file:\s*(\S+?)\s*(?:-->)?$")
@@ -59,3 +61,24 @@ def write_guide_files(guide: Path, folder: Path) -> dict[str, Path]:
 
 SUCCEEDED = re.compile(r"(\d+)/(\d+) succeeded")
 """A campaign's summary line: ``NAME: 39/40 succeeded = ...``."""
+
+
+def run_guide_as_written(
+    guide: Path, folder: Path, smc: Callable[..., Any], env: dict[str, str] | None = None
+) -> None:
+    """Write the guide's files into ``folder`` and run its commands there with ``smc``
+    (``env``: the variables the guide asks the reader to set): each must exit 0 without a
+    traceback, and each campaign run at least 40 trials with 95 % succeeding."""
+    assert guide_files(guide) and guide_commands(guide, env), f"{guide}: no files or commands"
+    write_guide_files(guide, folder)
+    campaigns = []
+    for argv in guide_commands(guide, env):
+        assert argv[0] == "smc", argv
+        proc = smc(*argv[1:], cwd=folder, timeout=900)
+        assert proc.returncode == 0, (argv, proc.stdout[-2000:], proc.stderr[-2000:])
+        assert "Traceback" not in proc.stderr, proc.stderr
+        campaigns += list(SUCCEEDED.finditer(proc.stdout + proc.stderr))
+    assert campaigns, f"{guide}: no campaign"
+    for m in campaigns:
+        ok, n = int(m.group(1)), int(m.group(2))
+        assert n >= 40 and ok >= 0.95 * n, m.group(0)

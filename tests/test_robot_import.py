@@ -265,7 +265,7 @@ def test_drafted_robot_records_compiles_and_replays(
         gripper = vendor_models / RS / "grippers" / "panda_gripper.xml"
     else:
         arm = vendor_models / RS / "robots" / "ur5e" / "robot.xml"
-        gripper = _without_default_group(vendor_models, tmp_path / "xarm")
+        gripper = vendor_models / RS / "grippers" / "xarm7_gripper.xml"
     out = tmp_path / robot
     code, stdout, stderr = _import(arm, "--gripper", gripper, "-o", out, "--scene", "bench_pick")
     assert code == 0, stdout + stderr

@@ -287,13 +287,14 @@ def test_menagerie_style_groups_and_a_meshdir_compose(vendor_models: Path) -> No
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("scene", "least"), [("vendor_ur5e_pick", 8), ("vendor_panda_pick", 9)])
+@pytest.mark.parametrize(("scene", "least"), [("vendor_ur5e_pick", 4), ("vendor_panda_pick", 5)])
 def test_vendor_robot_records_compiles_and_replays(
     vendor_models: Path, tmp_path: Path, scene: str, least: int
 ) -> None:
     """A scripted demonstration with robosuite's UR5e and bd_gripper, or its Panda and
-    hand (files unedited), achieves its task; its tree runs 10 layouts and ``least`` or
-    more succeed (measured: UR5e 9/10, Panda 10/10)."""
+    hand (files unedited, the robot files written by hand), achieves its task; its tree
+    runs 5 layouts and ``least`` or more succeed (measured over 10: UR5e 9, Panda 10). The
+    rates over 40 trials are the imported robots' (docs/robots.md, test_robot_import.py)."""
     folder = TESTS / "scenes" / scene
     log, tree = tmp_path / "demo.mcap", tmp_path / "tree.json"
     proc = smc(
@@ -309,9 +310,9 @@ def test_vendor_robot_records_compiles_and_replays(
     assert proc.returncode == 0 and "task achieved" in proc.stdout, proc.stdout + proc.stderr
     proc = smc("compile", log, "-o", tree)
     assert proc.returncode == 0, proc.stderr
-    proc = smc("replay", tree, "--trials", "10", "--seed", "3", "--workers", "1", timeout=1800)
+    proc = smc("replay", tree, "--trials", "5", "--seed", "3", "--workers", "1", timeout=1800)
     assert proc.returncode == 0, proc.stderr
-    m = re.search(r"(\d+)/10 succeeded", proc.stdout)
+    m = re.search(r"(\d+)/5 succeeded", proc.stdout)
     assert m and int(m.group(1)) >= least, proc.stdout
 
 
