@@ -52,6 +52,9 @@ CONTACT_DEPTH = 5e-4
 """A contact at home counts from this penetration [m] (touching surfaces give ~0)."""
 POI_SHARE = 0.25
 """At the open posture the POI keeps this share of the gap from each pad."""
+PAD_WINDOW = 0.02
+"""A pad is the part of a finger's contact geom within this of the POI along its z [m]:
+the importer's gripping stretch (``PAD_DEPTH``, 4 cm) centred on it."""
 POI_TOLERANCE = 0.005
 """How far outside the pads' extent (approach and width) the POI may lie [m]."""
 VIEW_SHARE = 0.01
@@ -307,7 +310,8 @@ def _travel_fix(bench: _Bench) -> str:
 def _pads(bench: _Bench, q: np.ndarray) -> list[list[int]]:
     """The contact geoms of each side of the gripper at posture ``q``: one side per
     finger joint; a one-jaw gripper's second side is the fixed jaw, the hand's contact
-    geom nearest the POI. Each side's list is ordered nearest the POI first."""
+    geoms. Each side's list is ordered nearest the POI first (its pad within PAD_WINDOW
+    along the POI's z, else its whole extent)."""
     m, d = bench.model, bench.data
     d.qpos[:] = q
     mujoco.mj_kinematics(m, d)
@@ -323,23 +327,53 @@ def _pads(bench: _Bench, q: np.ndarray) -> list[list[int]]:
     if not all(sides):
         return []
 
-    def from_poi(g: int) -> float:  # the box's centre, in the site's frame
-        return float(np.linalg.norm(_box(bench, g).mean(axis=0)))
+    def from_poi(g: int) -> tuple[float, float]:  # nearest point of its pad, of its extent
+        pad, whole = _box(bench, g), _box(bench, g, window=False)
+        assert whole is not None
+        near = np.inf if pad is None else float(np.linalg.norm(np.clip(0.0, *pad)))
+        return near, float(np.linalg.norm(np.clip(0.0, *whole)))
 
     return [sorted(side, key=from_poi) for side in sides]
 
 
-def _box(bench: _Bench, g: int) -> np.ndarray:
-    """Geom ``g``'s bounding box in the POI site's frame at the kinematics last set:
-    rows min and max, shape (2, 3) [m]."""
+def _box(bench: _Bench, g: int, *, window: bool = True) -> np.ndarray | None:
+    """Geom ``g``'s bounding box in the POI site's frame at the kinematics last set: rows
+    min and max, shape (2, 3) [m]. A mesh's box holds its vertices, a primitive's its
+    axis-aligned box's corners; with ``window``, only the part within PAD_WINDOW of the
+    POI along its z (None where the geom has none): a mesh jaw's box is that of its
+    fingertip, not of the whole part it is moulded with."""
     m, d = bench.model, bench.data
-    centre, half = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
-    corners = centre + half * np.array(
-        [[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
-    )
-    world = d.geom_xpos[g] + corners @ d.geom_xmat[g].reshape(3, 3).T
+    mesh = int(m.geom_dataid[g])
+    if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH and mesh >= 0:
+        adr, n = int(m.mesh_vertadr[mesh]), int(m.mesh_vertnum[mesh])
+        points = m.mesh_vert[adr : adr + n]
+    else:
+        centre, half = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
+        points = centre + half * _CORNERS
+    world = d.geom_xpos[g] + points @ d.geom_xmat[g].reshape(3, 3).T
     local = (world - d.site_xpos[bench.site]) @ d.site_xmat[bench.site].reshape(3, 3)
-    return np.array([local.min(axis=0), local.max(axis=0)])
+    box = np.array([local.min(axis=0), local.max(axis=0)])
+    if not window:
+        return box
+    if mesh >= 0 and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
+        near = local[np.abs(local[:, 2]) <= PAD_WINDOW]
+        return np.array([near.min(axis=0), near.max(axis=0)]) if len(near) else None
+    box[:, 2] = np.clip(box[:, 2], -PAD_WINDOW, PAD_WINDOW)
+    return box if box[0, 2] < box[1, 2] else None
+
+
+_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+
+
+def _pad_boxes(bench: _Bench, sides: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
+    """The two sides' nearest pads' boxes (:func:`_box`), each within PAD_WINDOW of the
+    POI where both have a part there, else their whole extents."""
+    pads = [_box(bench, s[0]) for s in sides]
+    if any(p is None for p in pads):
+        pads = [_box(bench, s[0], window=False) for s in sides]
+    a, b = pads
+    assert a is not None and b is not None
+    return a, b
 
 
 def _pad_gap(bench: _Bench, q: np.ndarray) -> float:
@@ -348,7 +382,7 @@ def _pad_gap(bench: _Bench, q: np.ndarray) -> float:
     sides = _pads(bench, q)
     if len(sides) != 2:
         return float("nan")
-    a, b = (_box(bench, s[0]) for s in sides)
+    a, b = _pad_boxes(bench, sides)
     if a[:, 1].mean() > b[:, 1].mean():
         a, b = b, a
     return float(b[0, 1] - a[1, 1])
@@ -526,7 +560,7 @@ def check_poi(bench: _Bench, postures: Postures | None, gripper_ok: bool) -> Fin
     if len(sides) != 2:
         return Finding("poi", "skip", "not two pads (fingers with no contact geoms)")
     site = repr(bench.robot.poi)
-    a, b = (_box(bench, s[0]) for s in sides)
+    a, b = _pad_boxes(bench, sides)
     names = [_geom_name(bench.model, s[0]) for s in sides]
     if a[:, 1].mean() > b[:, 1].mean():
         a, b, names = b, a, names[::-1]
@@ -552,7 +586,7 @@ def check_poi(bench: _Bench, postures: Postures | None, gripper_ok: bool) -> Fin
             return Finding("poi", "fail", measured, fix)
     sides = _pads(bench, postures.closed)
     if len(bench.finger_j) >= 2 and len(sides) == 2:
-        ca, cb = (_box(bench, s[0]) for s in sides)
+        ca, cb = _pad_boxes(bench, sides)
         meet = (min(ca[1, 1], cb[1, 1]) + max(ca[0, 1], cb[0, 1])) / 2
         if abs(meet) > POI_SHARE * gap:
             measured += f"; closed, the pads meet {meet * 1000:+.0f} mm from it"

@@ -119,6 +119,44 @@ def _tip(
     return g, _pad_point(m, d, g, a)
 
 
+def _reach(m: mujoco.MjModel, d: mujoco.MjData, g: int, a: np.ndarray) -> float:
+    """How far along ``a`` a geom reaches: a mesh's furthest vertex, else its box [m]."""
+    mesh = int(m.geom_dataid[g])
+    if m.geom_type[g] != mujoco.mjtGeom.mjGEOM_MESH or mesh < 0:
+        return _tip_depth(m, d, g, a)
+    adr, n = int(m.mesh_vertadr[mesh]), int(m.mesh_vertnum[mesh])
+    xmat = d.geom_xmat[g].reshape(3, 3)
+    return float((d.geom_xpos[g] + m.mesh_vert[adr : adr + n] @ xmat.T).max(axis=0) @ a)
+
+
+def _facing_share(
+    m: mujoco.MjModel,
+    data: list[mujoco.MjData],
+    closed_i: int,
+    sides: tuple[list[int], list[int]],
+    fingers: set[int],
+    a: np.ndarray,
+) -> float:
+    """The largest share (in steps of 1/40) of a one-jaw gripper's closed-to-open travel at
+    which the moving jaw's tip stays within PAD_DEPTH / 4 of the fixed jaw's along the
+    approach ``a``: a hinged jaw that swings further back no longer grips across its POI."""
+    moving, fixed = sides
+    adr = np.array([m.jnt_qposadr[j] for j in sorted(fingers)], dtype=int)
+    q0, q1 = data[closed_i].qpos[adr], data[1 - closed_i].qpos[adr]
+    d = mujoco.MjData(m)
+    d.qpos[:] = data[closed_i].qpos
+    mujoco.mj_kinematics(m, d)
+    tip = max(_reach(m, d, g, a) for g in fixed) - PAD_DEPTH / 4
+    share = 0.0
+    for t in np.linspace(0.0, 1.0, 41):
+        d.qpos[adr] = q0 + t * (q1 - q0)
+        mujoco.mj_kinematics(m, d)
+        if max(_reach(m, d, g, a) for g in moving) < tip:
+            break
+        share = float(t)
+    return share if share > 0.0 else 1.0
+
+
 def _drive_ends(
     m: mujoco.MjModel, arm: ArmFound, act: int, ends: tuple[float, float]
 ) -> list[mujoco.MjData]:
@@ -219,6 +257,15 @@ def read_hand(arm: ArmFound, gripper: Path | None, where: Path, guesses: list[Gu
     ]
     closed_i = int(np.argmin(gaps))
     open_i = 1 - closed_i
+    ends_seen = (ends[0], ends[1])
+    if one_jaw:  # a hinged jaw swung past the fixed one's tip no longer faces it
+        share = _facing_share(m, data, closed_i, (side_a, side_b), fingers, a)
+        if share < 1.0:
+            ends = list(ends)
+            ends[open_i] = ends[closed_i] + share * (ends[open_i] - ends[closed_i])
+            data[open_i] = _drive_ends(m, arm, act, (ends[open_i],))[0]
+            qa[open_i] = data[open_i].qpos[[m.jnt_qposadr[j] for j in driven]]
+            pads[open_i] = [_tip(m, data[open_i], s, a) for s in (side_a, side_b)]
     commands = (ends[closed_i], ends[open_i])
     opening = (float(qa[closed_i][0]), float(qa[open_i][0]))
     coupled = (
@@ -234,8 +281,14 @@ def read_hand(arm: ArmFound, gripper: Path | None, where: Path, guesses: list[Gu
         Guess(
             "gripper.commands",
             flow(commands),
-            f"driven to {ends[0]:g} and {ends[1]:g} for {SETTLE:g} s: the pads "
-            f"{gaps[0] * 1000:.0f} and {gaps[1] * 1000:.0f} mm apart; the wider end opens",
+            f"driven to {ends_seen[0]:g} and {ends_seen[1]:g} for {SETTLE:g} s: the pads "
+            f"{gaps[0] * 1000:.0f} and {gaps[1] * 1000:.0f} mm apart; the wider end opens"
+            + (
+                f", as far as {commands[1]:g} (the jaw's tip stays within "
+                f"{PAD_DEPTH / 4 * 1000:.0f} mm of the fixed jaw's along the approach)"
+                if commands[1] not in ends_seen
+                else ""
+            ),
         ),
         Guess(
             "gripper.opening",
@@ -243,8 +296,10 @@ def read_hand(arm: ArmFound, gripper: Path | None, where: Path, guesses: list[Gu
             f"{jname} settled there (closed, open)",
         ),
     ]
-    # Closed, the tips reach furthest (a hinged jaw swings out open): the pads there.
-    at, poi = _poi(m, data[closed_i], pads[closed_i], a, u, hand, arm.names[-1], guesses)
+    # Closed, the tips reach furthest (a hinged jaw swings out open): the pads there; one
+    # jaw holds an object against the other, the middle of the open gap.
+    at_i = open_i if one_jaw else closed_i
+    at, poi = _poi(m, data[at_i], pads[at_i], a, u, hand, arm.names[-1], guesses)
     names = [name_of(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints]
     return HandFound(names, act_name, tuple(couple), commands, opening, at, poi)
 
