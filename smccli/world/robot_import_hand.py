@@ -121,12 +121,48 @@ def _tip(
 
 def _reach(m: mujoco.MjModel, d: mujoco.MjData, g: int, a: np.ndarray) -> float:
     """How far along ``a`` a geom reaches: a mesh's furthest vertex, else its box [m]."""
-    mesh = int(m.geom_dataid[g])
-    if m.geom_type[g] != mujoco.mjtGeom.mjGEOM_MESH or mesh < 0:
+    if m.geom_type[g] != mujoco.mjtGeom.mjGEOM_MESH or int(m.geom_dataid[g]) < 0:
         return _tip_depth(m, d, g, a)
-    adr, n = int(m.mesh_vertadr[mesh]), int(m.mesh_vertnum[mesh])
-    xmat = d.geom_xmat[g].reshape(3, 3)
-    return float((d.geom_xpos[g] + m.mesh_vert[adr : adr + n] @ xmat.T).max(axis=0) @ a)
+    return float((_points(m, d, g) @ a).max())
+
+
+def _points(m: mujoco.MjModel, d: mujoco.MjData, g: int) -> np.ndarray:
+    """A geom's mesh vertices, else its bounding box's corners (world frame) [m]."""
+    mesh = int(m.geom_dataid[g])
+    if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH and mesh >= 0:
+        adr, n = int(m.mesh_vertadr[mesh]), int(m.mesh_vertnum[mesh])
+        local = m.mesh_vert[adr : adr + n]
+    else:
+        corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
+        local = m.geom_aabb[g, :3] + m.geom_aabb[g, 3:] * corners
+    return d.geom_xpos[g] + local @ d.geom_xmat[g].reshape(3, 3).T
+
+
+def _between_faces(
+    m: mujoco.MjModel,
+    d: mujoco.MjData,
+    pads: list[tuple[int, np.ndarray]],
+    a: np.ndarray,
+    u: np.ndarray,
+) -> tuple[list[tuple[int, np.ndarray]], float]:
+    """The pad points moved along the finger travel (``u`` across the approach ``a``) so
+    that their midpoint lies midway between the pads' inner faces (their points within
+    PAD_DEPTH / 2 of it along ``a``): a jaw's points average its thickness, which differs
+    from the fixed jaw's. And the gap between the faces [m] (inf where a pad has no point
+    there: the points are then kept)."""
+    mid = (pads[0][1] + pads[1][1]) / 2
+    y = u - (u @ a) * a
+    y /= np.linalg.norm(y)
+    faces = []
+    for g, point in pads:
+        p = _points(m, d, g)
+        p = p[np.abs((p - mid) @ a) <= PAD_DEPTH / 2]
+        if not len(p):
+            return pads, float("inf")
+        along = (p - mid) @ y
+        faces.append(along.min() if (point - mid) @ y > 0 else along.max())
+    shift = y * float(np.mean(faces))
+    return [(g, point + shift) for g, point in pads], float(abs(faces[0] - faces[1]))
 
 
 def _facing_share(
@@ -299,7 +335,11 @@ def read_hand(arm: ArmFound, gripper: Path | None, where: Path, guesses: list[Gu
     # Closed, the tips reach furthest (a hinged jaw swings out open): the pads there; one
     # jaw holds an object against the other, the middle of the open gap.
     at_i = open_i if one_jaw else closed_i
-    at, poi = _poi(m, data[at_i], pads[at_i], a, u, hand, arm.names[-1], guesses)
+    at_pads, near = pads[at_i], SITE_NEAR
+    if one_jaw:  # a site nearer one jaw than a quarter of the gap would fail smc robots
+        at_pads, gap = _between_faces(m, data[at_i], pads[at_i], a, u)
+        near = min(near, gap / 4)
+    at, poi = _poi(m, data[at_i], at_pads, a, u, (hand, near), arm.names[-1], guesses)
     names = [name_of(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints]
     return HandFound(names, act_name, tuple(couple), commands, opening, at, poi)
 
@@ -310,12 +350,14 @@ def _poi(
     pads: list[tuple[int, np.ndarray]],
     a: np.ndarray,
     u: np.ndarray,
-    hand: set[int],
+    within: tuple[set[int], float],
     roll: str,
     guesses: list[Guess],
 ) -> tuple[str, Frame]:
-    """The POI: the gripper's pinch site near the pads' midpoint, else that midpoint (in
-    the hand's body); z along the approach ``a``, y along the finger travel ``u``."""
+    """The POI: the gripper's pinch site near the pads' midpoint (``within`` = the hand's
+    bodies, how near [m]), else that midpoint (in the hand's body); z along the approach
+    ``a``, y along the finger travel ``u``."""
+    hand, near = within
     mid = (pads[0][1] + pads[1][1]) / 2
     y = u - (u @ a) * a
     y /= np.linalg.norm(y)
@@ -325,7 +367,7 @@ def _poi(
             for s in range(m.nsite)
             if PINCH_SITE.search(name_of(m, mujoco.mjtObj.mjOBJ_SITE, s))
             and int(m.site_bodyid[s]) in hand
-            and np.linalg.norm(d.site_xpos[s] - mid) < SITE_NEAR
+            and np.linalg.norm(d.site_xpos[s] - mid) < near
         ),
         key=lambda s: (len(name_of(m, mujoco.mjtObj.mjOBJ_SITE, s)), s),
     )
