@@ -194,7 +194,7 @@ def _facing_share(
 
 
 def _drive_ends(
-    m: mujoco.MjModel, arm: ArmFound, act: int, ends: tuple[float, float]
+    m: mujoco.MjModel, arm: ArmFound, act: int, ends: list[float] | tuple[float, ...]
 ) -> list[mujoco.MjData]:
     """The gripper driven to each end of ``ends``, the arm held at zero (clipped to its
     limits), without gravity: the settled states (kinematics computed)."""
@@ -244,6 +244,37 @@ def _find_actuator(
     return acts[0], couple
 
 
+def _sides(
+    m: mujoco.MjModel,
+    fingers: set[int],
+    hand: set[int],
+    data: list[mujoco.MjData],
+    source: Path,
+) -> tuple[list[int], list[int], np.ndarray, list[int]]:
+    """The two sides' collision geoms (those the finger joints move, split by the way they
+    move between the two states ``data``; a one-jaw gripper's second side the hand's own),
+    the finger travel's direction, and every geom the finger joints move."""
+    moving = set().union(*(subtree(m, int(m.jnt_bodyid[j])) for j in fingers))
+    geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in moving and _collides(m, g)]
+    if not geoms:
+        raise bad_file(source, "its fingers have no collision geoms (no pads to grip with)")
+    disp = np.array([data[1].geom_xpos[g] - data[0].geom_xpos[g] for g in geoms])
+    u = np.linalg.svd(disp)[2][0]
+    sign = disp @ u
+    side_a = [g for g, s in zip(geoms, sign, strict=True) if s > 1e-4]
+    side_b = [g for g, s in zip(geoms, sign, strict=True) if s < -1e-4]
+    if not side_a or not side_b:  # the fixed jaw: the hand's own collision geoms
+        side_a = side_a or side_b
+        side_b = [
+            g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in hand - moving and _collides(m, g)
+        ]
+        if not side_b:
+            raise bad_file(
+                source, "one finger moves and the hand has no collision geom to grip against"
+            )
+    return side_a, side_b, u, geoms
+
+
 def read_hand(arm: ArmFound, gripper: Path | None, where: Path, guesses: list[Guess]) -> HandFound:
     """The gripper's joints, actuator, commands and POI, found in the composed model."""
     source = gripper or arm.path
@@ -255,34 +286,16 @@ def read_hand(arm: ArmFound, gripper: Path | None, where: Path, guesses: list[Gu
         act = m.actuator(act_name).id
     driven, through = _driven(m, act)
     lo, hi = m.actuator_ctrlrange[act] if m.actuator_ctrllimited[act] else m.jnt_range[driven[0]]
-    ends = (float(lo), float(hi))
+    ends = [float(lo), float(hi)]
     data = _drive_ends(m, arm, act, ends)
     qa = [d.qpos[[m.jnt_qposadr[j] for j in driven]] for d in data]
     travel = qa[1] - qa[0]
     joints = [j for j, t in zip(driven, travel, strict=True) if abs(t) > 0.5 * abs(travel[0])]
-    # The sides: collision geoms the finger joints move, split by the way they move.
     fingers = _finger_joints(m, arm, gripper is not None)
-    moving = set().union(*(subtree(m, int(m.jnt_bodyid[j])) for j in fingers))
-    geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in moving and _collides(m, g)]
-    if not geoms:
-        raise bad_file(source, "its fingers have no collision geoms (no pads to grip with)")
-    disp = np.array([data[1].geom_xpos[g] - data[0].geom_xpos[g] for g in geoms])
-    u = np.linalg.svd(disp)[2][0]
-    sign = disp @ u
-    side_a = [g for g, s in zip(geoms, sign, strict=True) if s > 1e-4]
-    side_b = [g for g, s in zip(geoms, sign, strict=True) if s < -1e-4]
     last = m.joint(arm.names[-1]).id
     hand = subtree(m, int(m.jnt_bodyid[last]))
-    one_jaw = not side_a or not side_b
-    if one_jaw:  # the fixed jaw: the hand's own collision geoms
-        side_a = side_a or side_b
-        side_b = [
-            g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in hand - moving and _collides(m, g)
-        ]
-        if not side_b:
-            raise bad_file(
-                source, "one finger moves and the hand has no collision geom to grip against"
-            )
+    side_a, side_b, u, geoms = _sides(m, fingers, hand, data, source)
+    one_jaw = not set(side_b) & set(geoms)
     d0 = data[0]
     a = d0.xaxis[last].copy()
     if (np.mean([d0.geom_xpos[g] for g in geoms], axis=0) - d0.xanchor[last]) @ a < 0:
@@ -293,22 +306,47 @@ def read_hand(arm: ArmFound, gripper: Path | None, where: Path, guesses: list[Gu
     ]
     closed_i = int(np.argmin(gaps))
     open_i = 1 - closed_i
-    ends_seen = (ends[0], ends[1])
+    ends_seen = tuple(ends)
     if one_jaw:  # a hinged jaw swung past the fixed one's tip no longer faces it
         share = _facing_share(m, data, closed_i, (side_a, side_b), fingers, a)
         if share < 1.0:
-            ends = list(ends)
             ends[open_i] = ends[closed_i] + share * (ends[open_i] - ends[closed_i])
             data[open_i] = _drive_ends(m, arm, act, (ends[open_i],))[0]
             qa[open_i] = data[open_i].qpos[[m.jnt_qposadr[j] for j in driven]]
             pads[open_i] = [_tip(m, data[open_i], s, a) for s in (side_a, side_b)]
     commands = (ends[closed_i], ends[open_i])
     opening = (float(qa[closed_i][0]), float(qa[open_i][0]))
+    guesses += _hand_guesses(
+        m, (act_name, through, couple, joints[0]), ends_seen, commands, opening, gaps
+    )
+    # Closed, the tips reach furthest (a hinged jaw swings out open): the pads there; one
+    # jaw holds an object against the other, the middle of the open gap.
+    at_i = open_i if one_jaw else closed_i
+    at_pads, near = pads[at_i], SITE_NEAR
+    if one_jaw:  # a site nearer one jaw than a quarter of the gap would fail smc robots
+        at_pads, gap = _between_faces(m, data[at_i], pads[at_i], a, u)
+        near = min(near, gap / 4)
+    at, poi = _poi(m, data[at_i], at_pads, a, u, (hand, near), arm.names[-1], guesses)
+    names = [name_of(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints]
+    return HandFound(names, act_name, tuple(couple), commands, opening, at, poi)
+
+
+def _hand_guesses(
+    m: mujoco.MjModel,
+    found: tuple[str, str, list[tuple[str, str, float]], int],
+    ends_seen: tuple[float, ...],
+    commands: tuple[float, float],
+    opening: tuple[float, float],
+    gaps: list[float],
+) -> list[Guess]:
+    """What :func:`read_hand` guessed about the actuator (``found`` = its name, what it
+    drives through, the coupled fingers, the first finger joint) and its commands."""
+    act_name, through, couple, joint = found
     coupled = (
         "; coupled: " + ", ".join(f"{j} = {r:g} x {t}" for j, t, r in couple) if couple else ""
     )
-    jname = name_of(m, mujoco.mjtObj.mjOBJ_JOINT, joints[0])
-    guesses += [
+    jname = name_of(m, mujoco.mjtObj.mjOBJ_JOINT, joint)
+    return [
         Guess(
             "gripper.actuator",
             act_name,
@@ -332,16 +370,6 @@ def read_hand(arm: ArmFound, gripper: Path | None, where: Path, guesses: list[Gu
             f"{jname} settled there (closed, open)",
         ),
     ]
-    # Closed, the tips reach furthest (a hinged jaw swings out open): the pads there; one
-    # jaw holds an object against the other, the middle of the open gap.
-    at_i = open_i if one_jaw else closed_i
-    at_pads, near = pads[at_i], SITE_NEAR
-    if one_jaw:  # a site nearer one jaw than a quarter of the gap would fail smc robots
-        at_pads, gap = _between_faces(m, data[at_i], pads[at_i], a, u)
-        near = min(near, gap / 4)
-    at, poi = _poi(m, data[at_i], at_pads, a, u, (hand, near), arm.names[-1], guesses)
-    names = [name_of(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints]
-    return HandFound(names, act_name, tuple(couple), commands, opening, at, poi)
 
 
 def _poi(
