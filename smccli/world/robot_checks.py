@@ -38,7 +38,7 @@ import numpy as np
 from smccli.errors import SceneError
 from smccli.world.controller import CartesianController, reach_problem
 from smccli.world.robot import Robot, arm_reach, robot_model_spec
-from smccli.world.robot_view import PinholeView, link_spheres, range_corners
+from smccli.world.robot_view import PinholeView, geom_box, link_spheres, range_corners
 from smccli.world.specs import ObjectSpec, Scene
 
 Status = Literal["pass", "fail", "skip"]
@@ -343,32 +343,12 @@ def _pads(bench: _Bench, q: np.ndarray) -> list[list[int]]:
 
 
 def _box(bench: _Bench, g: int, *, window: bool = True) -> np.ndarray | None:
-    """Geom ``g``'s bounding box in the POI site's frame at the kinematics last set: rows
-    min and max, shape (2, 3) [m]. A mesh's box holds its vertices, a primitive's its
-    axis-aligned box's corners; with ``window``, only the part within PAD_WINDOW of the
-    POI along its z (None where the geom has none): a mesh jaw's box is that of its
-    fingertip, not of the whole part it is moulded with."""
-    m, d = bench.model, bench.data
-    mesh = int(m.geom_dataid[g])
-    if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH and mesh >= 0:
-        adr, n = int(m.mesh_vertadr[mesh]), int(m.mesh_vertnum[mesh])
-        points = m.mesh_vert[adr : adr + n]
-    else:
-        centre, half = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
-        points = centre + half * _CORNERS
-    world = d.geom_xpos[g] + points @ d.geom_xmat[g].reshape(3, 3).T
-    local = (world - d.site_xpos[bench.site]) @ d.site_xmat[bench.site].reshape(3, 3)
-    box = np.array([local.min(axis=0), local.max(axis=0)])
-    if not window:
-        return box
-    if mesh >= 0 and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
-        near = local[np.abs(local[:, 2]) <= PAD_WINDOW]
-        return np.array([near.min(axis=0), near.max(axis=0)]) if len(near) else None
-    box[:, 2] = np.clip(box[:, 2], -PAD_WINDOW, PAD_WINDOW)
-    return box if box[0, 2] < box[1, 2] else None
-
-
-_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    """Geom ``g``'s box in the POI site's frame (:func:`~smccli.world.robot_view.
+    geom_box`), with ``window`` only its part within PAD_WINDOW of the POI along its z: a
+    mesh jaw's box is that of its fingertip, not of the whole part it is moulded with."""
+    d, site = bench.data, bench.site
+    frame = (d.site_xpos[site], d.site_xmat[site].reshape(3, 3))
+    return geom_box(bench.model, d, g, frame, PAD_WINDOW if window else None)
 
 
 def _pad_boxes(bench: _Bench, sides: list[list[int]]) -> tuple[np.ndarray, np.ndarray, bool]:
