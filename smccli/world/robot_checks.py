@@ -16,8 +16,11 @@ scene given, else a table holding the robot alone) and measures:
 - ``reach``: the POI reaches each object's range on a grid, pointing down at the object's
   yaw (or the half turn the gripper's symmetry allows), by the controller's IK;
 - ``poi``: at the open posture the POI lies between the two pads along its y axis (the
-  finger travel), at least a quarter of the gap from each, and within the pads' extent
-  along the other two axes; with two fingers, closed, they meet near it.
+  finger travel), at least a quarter of the gap from each (a one-jaw gripper's POI may lie
+  nearer its fixed jaw, POI_HOLD), and within the pads' extent along the other two axes;
+  with two fingers, closed, they meet near it. A pad is the part of a finger's contact
+  geom within PAD_WINDOW of the POI along its z (a mesh's by its vertices, a primitive's
+  by its box).
 
 Each finding is data: the check, its status, what was measured and one line saying what
 to fix. A mobile base has its arm carried to the objects: reach and view are skipped.
@@ -35,7 +38,7 @@ import numpy as np
 from smccli.errors import SceneError
 from smccli.world.controller import CartesianController, reach_problem
 from smccli.world.robot import Robot, arm_reach, robot_model_spec
-from smccli.world.robot_view import PinholeView, link_spheres, range_corners
+from smccli.world.robot_view import PinholeView, geom_box, link_spheres, range_corners
 from smccli.world.specs import ObjectSpec, Scene
 
 Status = Literal["pass", "fail", "skip"]
@@ -52,6 +55,12 @@ CONTACT_DEPTH = 5e-4
 """A contact at home counts from this penetration [m] (touching surfaces give ~0)."""
 POI_SHARE = 0.25
 """At the open posture the POI keeps this share of the gap from each pad."""
+PAD_WINDOW = 0.02
+"""A pad is the part of a finger's contact geom within this of the POI along its z [m]:
+the importer's gripping stretch (``PAD_DEPTH``, 4 cm) centred on it."""
+POI_HOLD = 0.01
+"""A one-jaw gripper's POI may lie this near the fixed jaw, less than POI_SHARE of a wide
+gap [m]: an object 2 cm across held against it has its centre there."""
 POI_TOLERANCE = 0.005
 """How far outside the pads' extent (approach and width) the POI may lie [m]."""
 VIEW_SHARE = 0.01
@@ -307,7 +316,8 @@ def _travel_fix(bench: _Bench) -> str:
 def _pads(bench: _Bench, q: np.ndarray) -> list[list[int]]:
     """The contact geoms of each side of the gripper at posture ``q``: one side per
     finger joint; a one-jaw gripper's second side is the fixed jaw, the hand's contact
-    geom nearest the POI. Each side's list is ordered nearest the POI first."""
+    geoms. Each side's list is ordered nearest the POI first (its pad within PAD_WINDOW
+    along the POI's z, else its whole extent)."""
     m, d = bench.model, bench.data
     d.qpos[:] = q
     mujoco.mj_kinematics(m, d)
@@ -323,23 +333,34 @@ def _pads(bench: _Bench, q: np.ndarray) -> list[list[int]]:
     if not all(sides):
         return []
 
-    def from_poi(g: int) -> float:  # the box's centre, in the site's frame
-        return float(np.linalg.norm(_box(bench, g).mean(axis=0)))
+    def from_poi(g: int) -> tuple[float, float]:  # nearest point of its pad, of its extent
+        pad, whole = _box(bench, g), _box(bench, g, window=False)
+        assert whole is not None
+        near = np.inf if pad is None else float(np.linalg.norm(np.clip(0.0, *pad)))
+        return near, float(np.linalg.norm(np.clip(0.0, *whole)))
 
     return [sorted(side, key=from_poi) for side in sides]
 
 
-def _box(bench: _Bench, g: int) -> np.ndarray:
-    """Geom ``g``'s bounding box in the POI site's frame at the kinematics last set:
-    rows min and max, shape (2, 3) [m]."""
-    m, d = bench.model, bench.data
-    centre, half = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
-    corners = centre + half * np.array(
-        [[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
-    )
-    world = d.geom_xpos[g] + corners @ d.geom_xmat[g].reshape(3, 3).T
-    local = (world - d.site_xpos[bench.site]) @ d.site_xmat[bench.site].reshape(3, 3)
-    return np.array([local.min(axis=0), local.max(axis=0)])
+def _box(bench: _Bench, g: int, *, window: bool = True) -> np.ndarray | None:
+    """Geom ``g``'s box in the POI site's frame (:func:`~smccli.world.robot_view.
+    geom_box`), with ``window`` only its part within PAD_WINDOW of the POI along its z: a
+    mesh jaw's box is that of its fingertip, not of the whole part it is moulded with."""
+    d, site = bench.data, bench.site
+    frame = (d.site_xpos[site], d.site_xmat[site].reshape(3, 3))
+    return geom_box(bench.model, d, g, frame, PAD_WINDOW if window else None)
+
+
+def _pad_boxes(bench: _Bench, sides: list[list[int]]) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The two sides' nearest pads' boxes (:func:`_box`), each within PAD_WINDOW of the
+    POI where both have a part there (then True), else their whole extents (False)."""
+    pads = [_box(bench, s[0]) for s in sides]
+    near = all(p is not None for p in pads)
+    if not near:
+        pads = [_box(bench, s[0], window=False) for s in sides]
+    a, b = pads
+    assert a is not None and b is not None
+    return a, b, near
 
 
 def _pad_gap(bench: _Bench, q: np.ndarray) -> float:
@@ -348,7 +369,9 @@ def _pad_gap(bench: _Bench, q: np.ndarray) -> float:
     sides = _pads(bench, q)
     if len(sides) != 2:
         return float("nan")
-    a, b = (_box(bench, s[0]) for s in sides)
+    a, b, near = _pad_boxes(bench, sides)
+    if not near:  # a jaw swung away from the POI: no gap across it
+        return float("nan")
     if a[:, 1].mean() > b[:, 1].mean():
         a, b = b, a
     return float(b[0, 1] - a[1, 1])
@@ -526,18 +549,26 @@ def check_poi(bench: _Bench, postures: Postures | None, gripper_ok: bool) -> Fin
     if len(sides) != 2:
         return Finding("poi", "skip", "not two pads (fingers with no contact geoms)")
     site = repr(bench.robot.poi)
-    a, b = (_box(bench, s[0]) for s in sides)
+    a, b, near = _pad_boxes(bench, sides)
     names = [_geom_name(bench.model, s[0]) for s in sides]
+    # One jaw holds an object against the fixed one (the hand's, sides[1]): the POI may
+    # lie POI_HOLD from it however wide the jaw opens.
     if a[:, 1].mean() > b[:, 1].mean():
         a, b, names = b, a, names[::-1]
+        fixed = 0
+    else:
+        fixed = 1
     low, high = a[1, 1], b[0, 1]  # inner faces, along the site's y
     gap = high - low
+    need = [POI_SHARE * gap] * 2
+    if len(bench.finger_j) == 1:
+        need[fixed] = min(need[fixed], POI_HOLD)
     measured = (
         f"open, the POI is {-low * 1000:.0f} mm from pad {names[0]} and {high * 1000:.0f} mm "
         f"from pad {names[1]} along its y (gap {gap * 1000:.0f} mm)"
     )
     middle = (low + high) / 2
-    if gap <= 0 or min(-low, high) < POI_SHARE * gap:
+    if near and (gap <= 0 or -low < need[0] or high < need[1]):
         fix = f"move site {site} {middle * 1000:+.0f} mm along its y axis, between the pads"
         return Finding("poi", "fail", measured, fix)
     lo = np.maximum(a[0], b[0]) - POI_TOLERANCE
@@ -549,10 +580,13 @@ def check_poi(bench: _Bench, postures: Postures | None, gripper_ok: bool) -> Fin
             fix = (
                 f"move site {site} {off * 1000:+.0f} mm along its {what[-2]} axis, within the pads"
             )
+            hinged = (bench.model.jnt_type[bench.finger_j] == mujoco.mjtJoint.mjJNT_HINGE).any()
+            if not near and hinged:
+                fix += ", or open the gripper less (gripper.opening): a hinged jaw swings back"
             return Finding("poi", "fail", measured, fix)
     sides = _pads(bench, postures.closed)
     if len(bench.finger_j) >= 2 and len(sides) == 2:
-        ca, cb = (_box(bench, s[0]) for s in sides)
+        ca, cb, _ = _pad_boxes(bench, sides)
         meet = (min(ca[1, 1], cb[1, 1]) + max(ca[0, 1], cb[0, 1])) / 2
         if abs(meet) > POI_SHARE * gap:
             measured += f"; closed, the pads meet {meet * 1000:+.0f} mm from it"

@@ -16,9 +16,12 @@ file). What it guesses, in order:
 - its commands: the actuator driven to each end of its ``ctrlrange`` in simulation until
   the fingers settle; the end where the pads' tips end further apart opens
   (``gripper.commands`` in the actuator's units, ``opening`` the finger joint's positions);
+  a one-jaw gripper opens only as far as its jaw's tip stays within a quarter of the
+  gripping stretch of the fixed jaw's (a hinged jaw swings back past it);
 - the POI: the gripper's own pinch site (a site named like grip, pinch or tcp) or the
-  midpoint of the pads nearest the fingertips; z along the wrist roll's axis out of the
-  fingers, y along the finger travel;
+  midpoint of the pads nearest the fingertips, closed (one jaw: midway between the jaws'
+  inner faces, open, a pinch site only within a quarter of that gap); z along the wrist
+  roll's axis out of the fingers, y along the finger travel;
 - a mount where the first joint's axis is not at the origin or the arm does not reach
   along +x at zero (the controller's convention);
 - home: the gripper pointing down above the table in front of the base, elbow up, by

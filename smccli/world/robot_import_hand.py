@@ -119,8 +119,82 @@ def _tip(
     return g, _pad_point(m, d, g, a)
 
 
+def _reach(m: mujoco.MjModel, d: mujoco.MjData, g: int, a: np.ndarray) -> float:
+    """How far along ``a`` a geom reaches: a mesh's furthest vertex, else its box [m]."""
+    if m.geom_type[g] != mujoco.mjtGeom.mjGEOM_MESH or int(m.geom_dataid[g]) < 0:
+        return _tip_depth(m, d, g, a)
+    return float((_points(m, d, g) @ a).max())
+
+
+def _points(m: mujoco.MjModel, d: mujoco.MjData, g: int) -> np.ndarray:
+    """A geom's mesh vertices, else its bounding box's corners (world frame) [m]."""
+    mesh = int(m.geom_dataid[g])
+    if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH and mesh >= 0:
+        adr, n = int(m.mesh_vertadr[mesh]), int(m.mesh_vertnum[mesh])
+        local = m.mesh_vert[adr : adr + n]
+    else:
+        corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
+        local = m.geom_aabb[g, :3] + m.geom_aabb[g, 3:] * corners
+    return d.geom_xpos[g] + local @ d.geom_xmat[g].reshape(3, 3).T
+
+
+def _between_faces(
+    m: mujoco.MjModel,
+    d: mujoco.MjData,
+    pads: list[tuple[int, np.ndarray]],
+    a: np.ndarray,
+    u: np.ndarray,
+) -> tuple[list[tuple[int, np.ndarray]], float]:
+    """The pad points moved along the finger travel (``u`` across the approach ``a``) so
+    that their midpoint lies midway between the pads' inner faces (their points within
+    PAD_DEPTH / 2 of it along ``a``): a jaw's points average its thickness, which differs
+    from the fixed jaw's. And the gap between the faces [m] (inf where a pad has no point
+    there: the points are then kept)."""
+    mid = (pads[0][1] + pads[1][1]) / 2
+    y = u - (u @ a) * a
+    y /= np.linalg.norm(y)
+    faces = []
+    for g, point in pads:
+        p = _points(m, d, g)
+        p = p[np.abs((p - mid) @ a) <= PAD_DEPTH / 2]
+        if not len(p):
+            return pads, float("inf")
+        along = (p - mid) @ y
+        faces.append(along.min() if (point - mid) @ y > 0 else along.max())
+    shift = y * float(np.mean(faces))
+    return [(g, point + shift) for g, point in pads], float(abs(faces[0] - faces[1]))
+
+
+def _facing_share(
+    m: mujoco.MjModel,
+    data: list[mujoco.MjData],
+    closed_i: int,
+    sides: tuple[list[int], list[int]],
+    fingers: set[int],
+    a: np.ndarray,
+) -> float:
+    """The largest share (in steps of 1/40) of a one-jaw gripper's closed-to-open travel at
+    which the moving jaw's tip stays within PAD_DEPTH / 4 of the fixed jaw's along the
+    approach ``a``: a hinged jaw that swings further back no longer grips across its POI."""
+    moving, fixed = sides
+    adr = np.array([m.jnt_qposadr[j] for j in sorted(fingers)], dtype=int)
+    q0, q1 = data[closed_i].qpos[adr], data[1 - closed_i].qpos[adr]
+    d = mujoco.MjData(m)
+    d.qpos[:] = data[closed_i].qpos
+    mujoco.mj_kinematics(m, d)
+    tip = max(_reach(m, d, g, a) for g in fixed) - PAD_DEPTH / 4
+    share = 0.0
+    for t in np.linspace(0.0, 1.0, 41):
+        d.qpos[adr] = q0 + t * (q1 - q0)
+        mujoco.mj_kinematics(m, d)
+        if max(_reach(m, d, g, a) for g in moving) < tip:
+            break
+        share = float(t)
+    return share if share > 0.0 else 1.0
+
+
 def _drive_ends(
-    m: mujoco.MjModel, arm: ArmFound, act: int, ends: tuple[float, float]
+    m: mujoco.MjModel, arm: ArmFound, act: int, ends: list[float] | tuple[float, ...]
 ) -> list[mujoco.MjData]:
     """The gripper driven to each end of ``ends``, the arm held at zero (clipped to its
     limits), without gravity: the settled states (kinematics computed)."""
@@ -170,6 +244,37 @@ def _find_actuator(
     return acts[0], couple
 
 
+def _sides(
+    m: mujoco.MjModel,
+    fingers: set[int],
+    hand: set[int],
+    data: list[mujoco.MjData],
+    source: Path,
+) -> tuple[list[int], list[int], np.ndarray, list[int]]:
+    """The two sides' collision geoms (those the finger joints move, split by the way they
+    move between the two states ``data``; a one-jaw gripper's second side the hand's own),
+    the finger travel's direction, and every geom the finger joints move."""
+    moving = set().union(*(subtree(m, int(m.jnt_bodyid[j])) for j in fingers))
+    geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in moving and _collides(m, g)]
+    if not geoms:
+        raise bad_file(source, "its fingers have no collision geoms (no pads to grip with)")
+    disp = np.array([data[1].geom_xpos[g] - data[0].geom_xpos[g] for g in geoms])
+    u = np.linalg.svd(disp)[2][0]
+    sign = disp @ u
+    side_a = [g for g, s in zip(geoms, sign, strict=True) if s > 1e-4]
+    side_b = [g for g, s in zip(geoms, sign, strict=True) if s < -1e-4]
+    if not side_a or not side_b:  # the fixed jaw: the hand's own collision geoms
+        side_a = side_a or side_b
+        side_b = [
+            g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in hand - moving and _collides(m, g)
+        ]
+        if not side_b:
+            raise bad_file(
+                source, "one finger moves and the hand has no collision geom to grip against"
+            )
+    return side_a, side_b, u, geoms
+
+
 def read_hand(arm: ArmFound, gripper: Path | None, where: Path, guesses: list[Guess]) -> HandFound:
     """The gripper's joints, actuator, commands and POI, found in the composed model."""
     source = gripper or arm.path
@@ -181,34 +286,16 @@ def read_hand(arm: ArmFound, gripper: Path | None, where: Path, guesses: list[Gu
         act = m.actuator(act_name).id
     driven, through = _driven(m, act)
     lo, hi = m.actuator_ctrlrange[act] if m.actuator_ctrllimited[act] else m.jnt_range[driven[0]]
-    ends = (float(lo), float(hi))
+    ends = [float(lo), float(hi)]
     data = _drive_ends(m, arm, act, ends)
     qa = [d.qpos[[m.jnt_qposadr[j] for j in driven]] for d in data]
     travel = qa[1] - qa[0]
     joints = [j for j, t in zip(driven, travel, strict=True) if abs(t) > 0.5 * abs(travel[0])]
-    # The sides: collision geoms the finger joints move, split by the way they move.
     fingers = _finger_joints(m, arm, gripper is not None)
-    moving = set().union(*(subtree(m, int(m.jnt_bodyid[j])) for j in fingers))
-    geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in moving and _collides(m, g)]
-    if not geoms:
-        raise bad_file(source, "its fingers have no collision geoms (no pads to grip with)")
-    disp = np.array([data[1].geom_xpos[g] - data[0].geom_xpos[g] for g in geoms])
-    u = np.linalg.svd(disp)[2][0]
-    sign = disp @ u
-    side_a = [g for g, s in zip(geoms, sign, strict=True) if s > 1e-4]
-    side_b = [g for g, s in zip(geoms, sign, strict=True) if s < -1e-4]
     last = m.joint(arm.names[-1]).id
     hand = subtree(m, int(m.jnt_bodyid[last]))
-    one_jaw = not side_a or not side_b
-    if one_jaw:  # the fixed jaw: the hand's own collision geoms
-        side_a = side_a or side_b
-        side_b = [
-            g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in hand - moving and _collides(m, g)
-        ]
-        if not side_b:
-            raise bad_file(
-                source, "one finger moves and the hand has no collision geom to grip against"
-            )
+    side_a, side_b, u, geoms = _sides(m, fingers, hand, data, source)
+    one_jaw = not set(side_b) & set(geoms)
     d0 = data[0]
     a = d0.xaxis[last].copy()
     if (np.mean([d0.geom_xpos[g] for g in geoms], axis=0) - d0.xanchor[last]) @ a < 0:
@@ -219,13 +306,47 @@ def read_hand(arm: ArmFound, gripper: Path | None, where: Path, guesses: list[Gu
     ]
     closed_i = int(np.argmin(gaps))
     open_i = 1 - closed_i
+    ends_seen = tuple(ends)
+    if one_jaw:  # a hinged jaw swung past the fixed one's tip no longer faces it
+        share = _facing_share(m, data, closed_i, (side_a, side_b), fingers, a)
+        if share < 1.0:
+            ends[open_i] = ends[closed_i] + share * (ends[open_i] - ends[closed_i])
+            data[open_i] = _drive_ends(m, arm, act, (ends[open_i],))[0]
+            qa[open_i] = data[open_i].qpos[[m.jnt_qposadr[j] for j in driven]]
+            pads[open_i] = [_tip(m, data[open_i], s, a) for s in (side_a, side_b)]
     commands = (ends[closed_i], ends[open_i])
     opening = (float(qa[closed_i][0]), float(qa[open_i][0]))
+    guesses += _hand_guesses(
+        m, (act_name, through, couple, joints[0]), ends_seen, commands, opening, gaps
+    )
+    # Closed, the tips reach furthest (a hinged jaw swings out open): the pads there; one
+    # jaw holds an object against the other, the middle of the open gap.
+    at_i = open_i if one_jaw else closed_i
+    at_pads, near = pads[at_i], SITE_NEAR
+    if one_jaw:  # a site nearer one jaw than a quarter of the gap would fail smc robots
+        at_pads, gap = _between_faces(m, data[at_i], pads[at_i], a, u)
+        near = min(near, gap / 4)
+    at, poi = _poi(m, data[at_i], at_pads, a, u, (hand, near), arm.names[-1], guesses)
+    names = [name_of(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints]
+    return HandFound(names, act_name, tuple(couple), commands, opening, at, poi)
+
+
+def _hand_guesses(
+    m: mujoco.MjModel,
+    found: tuple[str, str, list[tuple[str, str, float]], int],
+    ends_seen: tuple[float, ...],
+    commands: tuple[float, float],
+    opening: tuple[float, float],
+    gaps: list[float],
+) -> list[Guess]:
+    """What :func:`read_hand` guessed about the actuator (``found`` = its name, what it
+    drives through, the coupled fingers, the first finger joint) and its commands."""
+    act_name, through, couple, joint = found
     coupled = (
         "; coupled: " + ", ".join(f"{j} = {r:g} x {t}" for j, t, r in couple) if couple else ""
     )
-    jname = name_of(m, mujoco.mjtObj.mjOBJ_JOINT, joints[0])
-    guesses += [
+    jname = name_of(m, mujoco.mjtObj.mjOBJ_JOINT, joint)
+    return [
         Guess(
             "gripper.actuator",
             act_name,
@@ -234,8 +355,14 @@ def read_hand(arm: ArmFound, gripper: Path | None, where: Path, guesses: list[Gu
         Guess(
             "gripper.commands",
             flow(commands),
-            f"driven to {ends[0]:g} and {ends[1]:g} for {SETTLE:g} s: the pads "
-            f"{gaps[0] * 1000:.0f} and {gaps[1] * 1000:.0f} mm apart; the wider end opens",
+            f"driven to {ends_seen[0]:g} and {ends_seen[1]:g} for {SETTLE:g} s: the pads "
+            f"{gaps[0] * 1000:.0f} and {gaps[1] * 1000:.0f} mm apart; the wider end opens"
+            + (
+                f", as far as {commands[1]:g} (the jaw's tip stays within "
+                f"{PAD_DEPTH / 4 * 1000:.0f} mm of the fixed jaw's along the approach)"
+                if commands[1] not in ends_seen
+                else ""
+            ),
         ),
         Guess(
             "gripper.opening",
@@ -243,10 +370,6 @@ def read_hand(arm: ArmFound, gripper: Path | None, where: Path, guesses: list[Gu
             f"{jname} settled there (closed, open)",
         ),
     ]
-    # Closed, the tips reach furthest (a hinged jaw swings out open): the pads there.
-    at, poi = _poi(m, data[closed_i], pads[closed_i], a, u, hand, arm.names[-1], guesses)
-    names = [name_of(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints]
-    return HandFound(names, act_name, tuple(couple), commands, opening, at, poi)
 
 
 def _poi(
@@ -255,12 +378,14 @@ def _poi(
     pads: list[tuple[int, np.ndarray]],
     a: np.ndarray,
     u: np.ndarray,
-    hand: set[int],
+    within: tuple[set[int], float],
     roll: str,
     guesses: list[Guess],
 ) -> tuple[str, Frame]:
-    """The POI: the gripper's pinch site near the pads' midpoint, else that midpoint (in
-    the hand's body); z along the approach ``a``, y along the finger travel ``u``."""
+    """The POI: the gripper's pinch site near the pads' midpoint (``within`` = the hand's
+    bodies, how near [m]), else that midpoint (in the hand's body); z along the approach
+    ``a``, y along the finger travel ``u``."""
+    hand, near = within
     mid = (pads[0][1] + pads[1][1]) / 2
     y = u - (u @ a) * a
     y /= np.linalg.norm(y)
@@ -270,7 +395,7 @@ def _poi(
             for s in range(m.nsite)
             if PINCH_SITE.search(name_of(m, mujoco.mjtObj.mjOBJ_SITE, s))
             and int(m.site_bodyid[s]) in hand
-            and np.linalg.norm(d.site_xpos[s] - mid) < SITE_NEAR
+            and np.linalg.norm(d.site_xpos[s] - mid) < near
         ),
         key=lambda s: (len(name_of(m, mujoco.mjtObj.mjOBJ_SITE, s)), s),
     )

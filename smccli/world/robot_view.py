@@ -1,7 +1,8 @@
 """The scene's camera as a pinhole, for what ``smc robots`` checks of a home posture
 (:func:`smccli.world.robot_checks.check_home_view`): where an object's range lies in the
 image and which pixels a set of spheres covers. No rendering: the robot's bounding spheres
-(:func:`~smccli.world.robot_model.geometry`) projected, so the check needs no GL."""
+(:func:`~smccli.world.robot_model.geometry`) projected, so the check needs no GL. And a
+geom's box in a frame (:func:`geom_box`), where the checks measure the gripper's pads."""
 
 from __future__ import annotations
 
@@ -112,3 +113,38 @@ def link_spheres(
             centers.append(centre + s * rot[:, k])
             radii.append(radius)
     return np.array(centers).reshape(-1, 3), np.array(radii)
+
+
+_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+
+
+def geom_box(
+    m: mujoco.MjModel,
+    d: mujoco.MjData,
+    g: int,
+    frame: tuple[np.ndarray, np.ndarray],
+    window: float | None = None,
+) -> np.ndarray | None:
+    """Geom ``g``'s bounding box in ``frame`` = (origin (3,), rotation (3, 3)) at ``d``'s
+    kinematics: rows min and max, shape (2, 3) [m]. A mesh's box holds its vertices, a
+    primitive's its axis-aligned box's corners. With ``window``, only the part within
+    ``window`` of the frame's origin along its z (None where the geom has none)."""
+    mesh = int(m.geom_dataid[g])
+    is_mesh = m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH and mesh >= 0
+    if is_mesh:
+        adr, n = int(m.mesh_vertadr[mesh]), int(m.mesh_vertnum[mesh])
+        points = m.mesh_vert[adr : adr + n]
+    else:
+        points = m.geom_aabb[g, :3] + m.geom_aabb[g, 3:] * _CORNERS
+    world = d.geom_xpos[g] + points @ d.geom_xmat[g].reshape(3, 3).T
+    local = (world - frame[0]) @ frame[1]
+    if window is not None and is_mesh:
+        local = local[np.abs(local[:, 2]) <= window]
+        if not len(local):
+            return None
+    box = np.array([local.min(axis=0), local.max(axis=0)])
+    if window is not None and not is_mesh:
+        box[:, 2] = np.clip(box[:, 2], -window, window)
+        if box[0, 2] >= box[1, 2]:
+            return None
+    return box
