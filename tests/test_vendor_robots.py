@@ -282,7 +282,8 @@ def test_menagerie_style_groups_and_a_meshdir_compose(vendor_models: Path) -> No
     mujoco.mj_kinematics(model, data)
     np.testing.assert_allclose(data.xpos[model.body("base").id], 0, atol=1e-6)
     poi = data.site_xpos[model.site("smc/poi").id]
-    assert poi[0] > 0.35 and abs(poi[1]) < 1e-3, poi  # stretched out along +x at zero
+    # Stretched out along +x at zero (the POI mid-gap, a few mm off the roll axis).
+    assert poi[0] > 0.35 and abs(poi[1]) < 5e-3, poi
     assert load_robot(path).arm_joints[0] == "shoulder_pan"
 
 
