@@ -38,6 +38,7 @@ import numpy as np
 from smccli.errors import SceneError
 from smccli.world.controller import CartesianController, reach_problem
 from smccli.world.robot import Robot, arm_reach, robot_model_spec
+from smccli.world.robot_model import subtree_bodies
 from smccli.world.robot_view import PinholeView, geom_box, link_spheres, range_corners
 from smccli.world.specs import ObjectSpec, Scene
 
@@ -119,13 +120,13 @@ class _Bench:
         self.arm_q = np.array([m.jnt_qposadr[m.joint(n).id] for n in r.arm_joints], dtype=int)
         self.arm_act = np.array([m.actuator(n).id for n in r.arm_actuators], dtype=int)
         first = int(m.jnt_bodyid[m.joint(r.arm_joints[0]).id]) if r.arm_joints else 0
-        self.moving = _subtree(m, [first]) if first else set()
+        self.moving = subtree_bodies(m, [first]) if first else set()
         """Bodies the arm's joints move (its fixed base excluded)."""
         g = r.gripper
         self.finger_j = [m.joint(n).id for n in g.joints] if g else []
         self.finger_q = np.array([m.jnt_qposadr[j] for j in self.finger_j], dtype=int)
         self.finger_v = np.array([m.jnt_dofadr[j] for j in self.finger_j], dtype=int)
-        self.fingers = _subtree(m, [int(m.jnt_bodyid[j]) for j in self.finger_j])
+        self.fingers = subtree_bodies(m, [int(m.jnt_bodyid[j]) for j in self.finger_j])
         """Bodies the finger joints move."""
 
     def home_state(self) -> None:
@@ -135,19 +136,6 @@ class _Bench:
         d.qpos[self.arm_q] = self.robot.home
         d.ctrl[self.arm_act] = self.robot.home
         mujoco.mj_forward(m, d)
-
-
-def _subtree(model: mujoco.MjModel, roots: list[int]) -> set[int]:
-    """The bodies ``roots`` and their descendants."""
-    ids: set[int] = set()
-    for b in range(model.nbody):
-        a = b
-        while a > 0:
-            if a in roots:
-                ids.add(b)
-                break
-            a = int(model.body_parentid[a])
-    return ids
 
 
 def _geom_name(model: mujoco.MjModel, g: int) -> str:
@@ -231,7 +219,7 @@ def settle_gripper(bench: _Bench) -> Postures | None:
     _settle(bench, g.target(1.0))
     opened = bench.data.qpos.copy()
     m = bench.model
-    wrist = _subtree(m, [int(m.jnt_bodyid[m.joint(bench.robot.arm_joints[-1]).id])])
+    wrist = subtree_bodies(m, [int(m.jnt_bodyid[m.joint(bench.robot.arm_joints[-1]).id])])
     hand = tuple(  # every joint past the wrist: a coupled finger, a linkage's
         (m.joint(j).name, float(opened[m.jnt_qposadr[j]]))
         for j in range(m.njnt)
@@ -324,11 +312,11 @@ def _pads(bench: _Bench, q: np.ndarray) -> list[list[int]]:
     collides = (m.geom_contype != 0) | (m.geom_conaffinity != 0)
     sides = []
     for j in bench.finger_j:
-        bodies = _subtree(m, [int(m.jnt_bodyid[j])])
+        bodies = subtree_bodies(m, [int(m.jnt_bodyid[j])])
         sides.append([g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in bodies and collides[g]])
     if len(sides) == 1:
         last = int(m.jnt_bodyid[m.joint(bench.robot.arm_joints[-1]).id])
-        hand = _subtree(m, [last]) - bench.fingers
+        hand = subtree_bodies(m, [last]) - bench.fingers
         sides.append([g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in hand and collides[g]])
     if not all(sides):
         return []
@@ -427,7 +415,7 @@ def check_home_view(bench: _Bench, postures: Postures | None) -> Finding:
     camera = PinholeView(m, d, scene)
     joints = bench.robot.arm_joints
     second = int(m.jnt_bodyid[m.joint(joints[1] if len(joints) > 1 else joints[0]).id])
-    centers, radii = link_spheres(m, d, _subtree(m, [second]))
+    centers, radii = link_spheres(m, d, subtree_bodies(m, [second]))
     shares = []
     for obj in scene.objects:
         region, far = camera.region(range_corners(obj))

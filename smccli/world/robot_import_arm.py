@@ -19,6 +19,7 @@ from smccli.world.robot_compose import (
     Servo,
     robot_spec,
 )
+from smccli.world.robot_model import subtree_bodies
 
 PREFIX = "gripper/"
 FINGER_NAME = re.compile(r"grip|finger|jaw|claw", re.IGNORECASE)
@@ -126,19 +127,6 @@ def flange(m: mujoco.MjModel, last_body: int) -> str:
     return sites[0] if sites else name_of(m, mujoco.mjtObj.mjOBJ_BODY, b)
 
 
-def subtree(m: mujoco.MjModel, root: int) -> set[int]:
-    """Body ``root`` and its descendants."""
-    out = set()
-    for b in range(m.nbody):
-        a = b
-        while a > 0:
-            if a == root:
-                out.add(b)
-                break
-            a = int(m.body_parentid[a])
-    return out
-
-
 def actuators_on(m: mujoco.MjModel, joints: set[int]) -> list[int]:
     """Actuators whose transmission is one of ``joints`` or a tendon over them."""
     found = []
@@ -160,7 +148,7 @@ def _is_motor(m: mujoco.MjModel, a: int) -> bool:
 def servo_gains(m: mujoco.MjModel, chain: list[int]) -> tuple[tuple[float, ...], float]:
     """docs/robots.md's kp (3000 shoulder and elbow, 800 wrist: the first ceil(n/2) joints
     are the big ones), scaled by the moving mass over BIG_MASS where lighter; the mass [kg]."""
-    moving = subtree(m, int(m.jnt_bodyid[chain[0]]))
+    moving = subtree_bodies(m, [int(m.jnt_bodyid[chain[0]])])
     mass = float(sum(m.body_mass[b] for b in moving))
     scale = min(1.0, mass / BIG_MASS)
     big = math.ceil(len(chain) / 2)

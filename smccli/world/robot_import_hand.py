@@ -22,8 +22,8 @@ from smccli.world.robot_import_arm import (
     compose,
     flow,
     name_of,
-    subtree,
 )
+from smccli.world.robot_model import subtree_bodies
 
 PAD_DEPTH = 0.04
 """The stretch of a finger next to its tip that grips, along the approach [m]: its middle,
@@ -49,7 +49,7 @@ class HandFound:
 
 def _finger_joints(m: mujoco.MjModel, arm: ArmFound, separate: bool) -> set[int]:
     last = int(m.jnt_bodyid[m.joint(arm.names[-1]).id])
-    below = subtree(m, last)
+    below = subtree_bodies(m, [last])
     kinds = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
     return {
         j
@@ -254,7 +254,7 @@ def _sides(
     """The two sides' collision geoms (those the finger joints move, split by the way they
     move between the two states ``data``; a one-jaw gripper's second side the hand's own),
     the finger travel's direction, and every geom the finger joints move."""
-    moving = set().union(*(subtree(m, int(m.jnt_bodyid[j])) for j in fingers))
+    moving = subtree_bodies(m, [int(m.jnt_bodyid[j]) for j in fingers])
     geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in moving and _collides(m, g)]
     if not geoms:
         raise bad_file(source, "its fingers have no collision geoms (no pads to grip with)")
@@ -293,7 +293,7 @@ def read_hand(arm: ArmFound, gripper: Path | None, where: Path, guesses: list[Gu
     joints = [j for j, t in zip(driven, travel, strict=True) if abs(t) > 0.5 * abs(travel[0])]
     fingers = _finger_joints(m, arm, gripper is not None)
     last = m.joint(arm.names[-1]).id
-    hand = subtree(m, int(m.jnt_bodyid[last]))
+    hand = subtree_bodies(m, [int(m.jnt_bodyid[last])])
     side_a, side_b, u, geoms = _sides(m, fingers, hand, data, source)
     one_jaw = not set(side_b) & set(geoms)
     d0 = data[0]

@@ -8,6 +8,7 @@ axis, a box along its longest side) inflated by a margin.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import mujoco
@@ -17,6 +18,20 @@ from smccli.world.sensors import RobotGeometry
 
 MARGIN = 0.012
 """Inflation of every sphere [m]: covers depth noise at the robot's surface."""
+
+
+def subtree_bodies(model: mujoco.MjModel, roots: Iterable[int]) -> set[int]:
+    """The bodies ``roots`` (ids) and all their descendants."""
+    roots = set(roots)
+    ids: set[int] = set()
+    for b in range(model.nbody):
+        a = b
+        while a > 0:
+            if a in roots:
+                ids.add(b)
+                break
+            a = int(model.body_parentid[a])
+    return ids
 
 
 def robot_body_ids(model: mujoco.MjModel, joint_names: tuple[str, ...]) -> np.ndarray:
@@ -29,15 +44,8 @@ def robot_body_ids(model: mujoco.MjModel, joint_names: tuple[str, ...]) -> np.nd
     Without the pedestal the camera saw the robot's base as an object wherever the crop
     box reached it.
     """
-    ids: set[int] = set()
     roots = {int(model.jnt_bodyid[model.joint(n).id]) for n in joint_names}
-    for b in range(model.nbody):
-        a = b
-        while a > 0:
-            if a in roots:
-                ids.add(b)
-                break
-            a = int(model.body_parentid[a])
+    ids = subtree_bodies(model, roots)
     moving = [g for g in range(model.ngeom) if int(model.geom_bodyid[g]) in ids]
     if moving:
         groups = set(model.geom_group[moving].tolist())
