@@ -3,6 +3,7 @@ them; perception still finds the objects through the realistic camera."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -140,3 +141,57 @@ def test_perception_through_the_realistic_camera_still_matches_the_ideal_object(
         box = min(clusters, key=lambda c: np.linalg.norm(c.centroid - ref.centroid))
         assert d_cluster(box, ref, params) < 0.1, seed
         np.testing.assert_allclose(np.sort(box.extents[:2]), [0.04, 0.14], atol=0.006)
+
+
+def _frame_as_written(s: NoisySensors, frame: CameraFrame) -> CameraFrame:
+    """The camera model as the module docstring states it, one full-frame array per step:
+    the reference NoisySensors.frame must equal to the bit (draws in the same order)."""
+    c, rng = s.noise.camera, s.rng
+    depth = frame.depth.astype(np.float32, copy=True)
+    valid = np.isfinite(depth) & (depth > 0)
+    sigma = c.depth_a + c.depth_b * (depth - c.depth_z0) ** 2
+    depth[valid] += (rng.standard_normal(int(valid.sum())) * sigma[valid]).astype(np.float32)
+    rgb = frame.rgb.astype(np.float32) / 255.0
+    luma = rgb @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+    jump = np.zeros(depth.shape, dtype=bool)
+    dz_x = np.abs(np.diff(frame.depth, axis=1)) > c.edge_jump
+    dz_y = np.abs(np.diff(frame.depth, axis=0)) > c.edge_jump
+    jump[:, 1:] |= dz_x
+    jump[:, :-1] |= dz_x
+    jump[1:, :] |= dz_y
+    jump[:-1, :] |= dz_y
+    p = np.full(depth.shape, c.dropout, dtype=np.float32)
+    p = np.maximum(p, np.where(jump, c.edge_dropout, 0.0))
+    p = np.maximum(p, np.where(luma < c.dark_luma, c.dark_dropout, 0.0))
+    depth[rng.random(depth.shape) < p] = 0.0
+    depth[depth < 0] = 0.0
+    rgb = rgb * s.gain.astype(np.float32)
+    rgb += rng.standard_normal(rgb.shape).astype(np.float32) * c.colour_sigma
+    out = np.clip(np.rint(rgb * 255.0), 0, 255).astype(np.uint8)
+    return CameraFrame(frame.t, out, depth, frame.K, frame.T_world_camera)
+
+
+@pytest.mark.parametrize("dropouts", [(0.5, 0.3, 0.002), (0.0, 0.7, 0.1), (0.9, 0.0, 0.0)])
+def test_camera_model_is_the_full_frame_formula_to_the_bit(dropouts) -> None:
+    """NoisySensors.frame (per-kind dropout lookup, in-place colour) gives the images of
+    the model written one full-frame array per step, to the bit, and leaves the generator
+    where it leaves it: edges, dark patches, holes (0, inf, nan), a depth near the camera."""
+    rng = np.random.default_rng(5)
+    depth = np.repeat(np.repeat(rng.uniform(0.3, 2.0, (12, 16)), 10, 0), 10, 1)
+    depth += rng.normal(0, 0.002, depth.shape)
+    depth[rng.random(depth.shape) < 0.02] = 0.0
+    depth[:3, :4], depth[5, 7:12], depth[-1, -1] = np.inf, np.nan, 0.01
+    rgb = np.repeat(np.repeat(rng.integers(0, 256, (12, 16, 3)), 10, 0), 10, 1).astype(np.uint8)
+    frame = _frame(depth, rgb)
+    edge, dark, anywhere = dropouts
+    camera = replace(REALISTIC.camera, edge_dropout=edge, dark_dropout=dark, dropout=anywhere)
+    for seed in range(3):
+        a = NoisySensors(replace(REALISTIC, camera=camera), seed)
+        b = NoisySensors(replace(REALISTIC, camera=camera), seed)
+        for _ in range(2):
+            got, want = a.frame(frame), _frame_as_written(b, frame)
+            assert got.rgb.dtype == want.rgb.dtype and np.array_equal(got.rgb, want.rgb)
+            assert got.depth.dtype == want.depth.dtype
+            assert np.array_equal(got.depth, want.depth, equal_nan=True)
+            assert np.array_equal(np.signbit(got.depth), np.signbit(want.depth))
+        assert a.rng.random() == b.rng.random()

@@ -188,8 +188,9 @@ class NoisySensors:
         rng = self.rng
         depth = frame.depth.astype(np.float32, copy=True)
         valid = np.isfinite(depth) & (depth > 0)
-        sigma = c.depth_a + c.depth_b * (depth - c.depth_z0) ** 2
-        depth[valid] += (rng.standard_normal(int(valid.sum())) * sigma[valid]).astype(np.float32)
+        seen = depth[valid]  # sigma only where a reading is: the same float32 arithmetic
+        sigma = c.depth_a + c.depth_b * (seen - c.depth_z0) ** 2
+        depth[valid] = seen + (rng.standard_normal(len(seen)) * sigma).astype(np.float32)
         rgb = frame.rgb.astype(np.float32) / 255.0
         luma = rgb @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
         jump = np.zeros(depth.shape, dtype=bool)
@@ -199,14 +200,20 @@ class NoisySensors:
         jump[:, :-1] |= dz_x
         jump[1:, :] |= dz_y
         jump[:-1, :] |= dz_y
-        p = np.full(depth.shape, c.dropout, dtype=np.float32)
-        p = np.maximum(p, np.where(jump, c.edge_dropout, 0.0))
-        p = np.maximum(p, np.where(luma < c.dark_luma, c.dark_dropout, 0.0))
-        depth[rng.random(depth.shape) < p] = 0.0
+        # A pixel's dropout probability: the largest of those its kinds have, looked up by
+        # kind (edge, dark) instead of two full-frame maxima; float64, as drawn against.
+        anywhere = float(np.float32(c.dropout))
+        edge, dark = max(anywhere, c.edge_dropout), max(anywhere, c.dark_dropout)
+        p = np.array([anywhere, edge, dark, max(edge, dark)])
+        kind = jump.view(np.uint8) + 2 * (luma < c.dark_luma).view(np.uint8)
+        depth[rng.random(depth.shape) < p[kind]] = 0.0
         depth[depth < 0] = 0.0
-        rgb = rgb * self.gain.astype(np.float32)
-        rgb += rng.standard_normal(rgb.shape).astype(np.float32) * c.colour_sigma
-        out = np.clip(np.rint(rgb * 255.0), 0, 255).astype(np.uint8)
+        rgb *= self.gain.astype(np.float32)
+        grain = rng.standard_normal(rgb.shape).astype(np.float32)
+        grain *= c.colour_sigma
+        rgb += grain
+        rgb *= 255.0
+        out = np.clip(np.rint(rgb, out=rgb), 0, 255, out=rgb).astype(np.uint8)
         return replace(frame, rgb=out, depth=depth)
 
     def weight(self, t: float, weight: float) -> float:
