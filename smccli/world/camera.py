@@ -80,10 +80,11 @@ class CameraRenderer:
 
         The GL frustum is cut to that window and drawn in a viewport of its size: the same
         pixel rays at a fraction of the fill (llvmpipe's cost: about a third of a frame's
-        time for a look's window). Colours come out as the whole frame's; depths may differ
-        in the last bits (another projection matrix: a micrometre). The two passes and
-        the depth linearisation are mujoco.Renderer's, with its scene and GL context (its
-        ``render`` always draws the whole viewport).
+        time for a look's window). Colours come out as the whole frame's but for a rare
+        pixel on an edge (another projection matrix: one pixel of bench_pick's window
+        ``(29, 196, 30, 253)`` at the nominal layout); depths may differ in the last bits
+        (a micrometre). The two passes and the depth linearisation are mujoco.Renderer's,
+        with its scene and GL context (its ``render`` always draws the whole viewport).
         """
         h, w = self.height, self.width
         v0, v1, u0, u1 = region

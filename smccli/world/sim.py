@@ -471,8 +471,9 @@ class Sim:
 
         ``region`` ``(v0, v1, u0, u1)``: only rows ``v0:v1`` and columns ``u0:u1`` are
         rendered (a look at one object: a third of a frame's time), the rest of the image
-        holds no reading (depth 0, black). Its colours are the whole frame's; its depths
-        may differ from them in the last bits (a micrometre: another projection matrix).
+        holds no reading (depth 0, black). Its colours are the whole frame's but for a rare
+        pixel on an edge, its depths may differ from them in the last bits (a micrometre:
+        another projection matrix, :meth:`CameraRenderer.region`).
         A camera with noise renders the whole frame whatever ``region`` says: the noise's
         draws cover all of it, and a region would change every later draw.
         """
