@@ -7,13 +7,15 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from smccli.world.render_mesh import render_model
 from smccli.world.scene import HIDDEN_GROUP
 
 
 class CameraRenderer:
     """Renders camera ``cam_id`` of ``model`` at ``height`` x ``width`` pixels: a lit pass
-    for colour, a segmented pass for depth (mujoco.Renderer's passes). Its GL context is
-    built at the first frame."""
+    for colour, a segmented pass for depth (mujoco.Renderer's passes), meshes of more than
+    :data:`~smccli.world.render_mesh.RENDER_FACES` triangles drawn simplified. Its GL
+    context is built at the first frame."""
 
     def __init__(self, model: mujoco.MjModel, cam_id: int, height: int, width: int) -> None:
         self.model = model
@@ -48,7 +50,9 @@ class CameraRenderer:
 
     def _ready(self) -> mujoco.Renderer:
         if self._renderer is None:
-            self._renderer = mujoco.Renderer(self.model, self.height, self.width)
+            # The physics' data draws in a copy whose large meshes are simplified.
+            drawn = render_model(self.model)
+            self._renderer = mujoco.Renderer(drawn, self.height, self.width)
             self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
             self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
         return self._renderer

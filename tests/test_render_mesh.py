@@ -1,0 +1,93 @@
+"""The sensor camera draws a vendor's CAD meshes simplified (smccli/world/render_mesh.py):
+at most RENDER_FACES triangles each, the same picture but along the robot's silhouette,
+physics untouched."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from smccli.world import render_mesh
+from smccli.world.render_mesh import RENDER_FACES, render_model
+from smccli.world.scene import load_scene
+
+SOARM = Path(__file__).resolve().parent / "scenes" / "soarm_pick" / "scene.yaml"
+
+
+def _frame(model: mujoco.MjModel, data: mujoco.MjData, cam: str) -> tuple[np.ndarray, ...]:
+    r = mujoco.Renderer(model, 240, 320)
+    r.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
+    r.update_scene(data, camera=cam)
+    rgb = r.render().copy()
+    r.enable_depth_rendering()
+    r.update_scene(data, camera=cam)
+    depth = r.render().copy()
+    r.close()
+    return rgb, depth
+
+
+@pytest.fixture(scope="module")
+def soarm(vendor_models: Path) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    scene = load_scene(SOARM)
+    model = scene.model()
+    data = mujoco.MjData(model)
+    for joint, q in zip(scene.robot.arm_joints, scene.robot.home, strict=True):
+        data.qpos[model.jnt_qposadr[model.joint(joint).id]] = q
+    mujoco.mj_forward(model, data)
+    return model, data
+
+
+def test_large_meshes_are_drawn_simplified_and_physics_keeps_them(soarm) -> None:
+    model, _ = soarm
+    assert model.mesh_facenum.max() > 10 * RENDER_FACES  # the shipped SO-ARM's CAD meshes
+    before = model.mesh_vert.copy(), model.mesh_face.copy(), model.mesh_facenum.copy()
+    drawn = render_model(model)
+    assert drawn is not model
+    assert drawn.mesh_facenum.max() <= RENDER_FACES
+    assert drawn.mesh_facenum.sum() < model.mesh_facenum.sum() / 5
+    # the model physics steps is not touched, and the copy's bodies and geoms are its own
+    assert np.array_equal(model.mesh_vert, before[0])
+    assert np.array_equal(model.mesh_face, before[1])
+    assert np.array_equal(model.mesh_facenum, before[2])
+    assert (drawn.nbody, drawn.ngeom, drawn.nq) == (model.nbody, model.ngeom, model.nq)
+    assert np.array_equal(drawn.geom_size, model.geom_size)
+    # the simplified surface lies on the shipped one: no vertex strays from its mesh's box
+    for i in np.flatnonzero(model.mesh_facenum > RENDER_FACES):
+        full = model.mesh_vert[
+            model.mesh_vertadr[i] : model.mesh_vertadr[i] + model.mesh_vertnum[i]
+        ]
+        small = drawn.mesh_vert[
+            drawn.mesh_vertadr[i] : drawn.mesh_vertadr[i] + drawn.mesh_vertnum[i]
+        ]
+        assert np.all(small >= full.min(axis=0) - 1e-4) and np.all(small <= full.max(axis=0) + 1e-4)
+        normals = drawn.mesh_normal[drawn.mesh_normaladr[i] : drawn.mesh_normaladr[i] + len(small)]
+        assert np.allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-3)
+
+
+def test_the_sensor_sees_the_same_picture_but_along_the_silhouette(soarm) -> None:
+    model, data = soarm
+    rgb, depth = _frame(model, data, "sensor_camera")
+    rgb_s, depth_s = _frame(render_model(model), data, "sensor_camera")
+    robot_pixels = np.abs(depth - depth_s) > 0  # anything the simplification moved at all
+    assert robot_pixels.any()  # the arm is in view, so this compares something
+    colour = np.abs(rgb.astype(int) - rgb_s.astype(int)).max(axis=2) > 10
+    assert colour.mean() < 0.02, colour.mean()  # measured: 0.6 % of the frame
+    assert np.mean(np.abs(depth - depth_s) > 0.002) < 0.005
+
+
+def test_simplifying_is_repeatable(soarm) -> None:
+    """A campaign's trials must see the same robot: the same surface from a cold cache."""
+    model, _ = soarm
+    first = render_model(model)
+    render_mesh._SIMPLIFIED.clear()
+    again = render_model(model)
+    assert np.array_equal(first.mesh_vert, again.mesh_vert)
+    assert np.array_equal(first.mesh_face, again.mesh_face)
+
+
+def test_a_model_of_small_meshes_is_drawn_as_it_is() -> None:
+    model = load_scene("bench_pick").model()
+    assert render_model(model) is model
