@@ -13,7 +13,7 @@ export PYOPENGL_PLATFORM ?= egl
 # downloads no browser of its own).
 DEB_PKGS := libusb-1.0-0 libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri libglfw3 xvfb xdotool chromium
 
-.PHONY: setup models system-deps test test-fast test-under-load demo bench sample-logs viewer-shots lint clean
+.PHONY: setup models system-deps test test-durations test-fast test-under-load demo bench sample-logs viewer-shots lint clean
 
 $(VENV)/.installed: pyproject.toml
 	@$(MAKE) --no-print-directory system-deps
@@ -48,9 +48,10 @@ system-deps:
 	  fi; \
 	fi
 
-# One test process per core; a file's tests stay together (module fixtures built once).
+# One test process per core; a file's tests stay together (module fixtures built once),
+# the costly files first (tests/durations.json, tests/conftest.py; not xdist's reorder).
 TEST_WORKERS ?= $(shell nproc)
-PYTEST := $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
+PYTEST := $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
 
 test: setup models
 	$(PYTEST) --durations=15
@@ -68,6 +69,11 @@ test-under-load: setup models
 	trap 'kill $$pids 2>/dev/null || true' EXIT; \
 	echo "$(BURNERS) CPU burners running on $$(nproc) cores (pids$$pids, at most $(BURN_S) s)"; \
 	$(PYTEST) --durations=15
+
+# Measure each test file's seconds again (the order `make test` starts them in).
+test-durations: setup models
+	set -o pipefail; $(PYTEST) --durations=0 | tee .cache/durations.txt
+	$(PY) tests/durations.py < .cache/durations.txt
 
 test-fast: setup models
 	$(PYTEST) -m "not slow"

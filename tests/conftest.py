@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import fcntl
 import hashlib
+import json
 import os
 import subprocess
 import sys
@@ -49,6 +50,22 @@ def smc_process(
         env=SMC_ENV,
         cwd=cwd,
     )
+
+
+def pytest_collection_modifyitems(session, config, items) -> None:
+    """Costly test files first (seconds per file in tests/durations.json, `make
+    test-durations`; a file not listed counts as the median one): `--dist loadfile` hands
+    whole files to the workers in collection order, so the long ones start first and short
+    ones fill the end. Tests keep their order within a file."""
+    table = REPO / "tests" / "durations.json"
+    cost = json.loads(table.read_text()) if table.is_file() else {}
+    unknown = float(np.median(list(cost.values()))) if cost else 0.0
+    files = [item.nodeid.split("::")[0] for item in items]
+    first = {f: i for i, f in reversed(list(enumerate(files)))}
+    order = {
+        id(item): (-cost.get(f, unknown), first[f]) for item, f in zip(items, files, strict=True)
+    }
+    items.sort(key=lambda item: order[id(item)])
 
 
 def pytest_sessionfinish(session, exitstatus) -> None:
