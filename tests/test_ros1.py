@@ -1,0 +1,308 @@
+"""smc run --ros1 against a real roscore: `smc sim --ros1` is the robot, `smc run --ros1`
+drives it; both are real subprocesses on a master of their own (127.0.0.1, a free port).
+
+The tree's decisions over ROS equal `smc replay`'s on the same layouts, and the node stops
+the robot on stale sensors, a lost transform, an unreachable goal, no contingent SMC and
+Ctrl-C, with the reason published and printed and its exit code."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+import xmlrpc.client
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from smccli.ros.node import EXIT_CODES
+from conftest import sample_log_paths
+
+pytestmark = pytest.mark.skipif(
+    shutil.which("roscore") is None or not Path("/usr/lib/python3/dist-packages/rospy").is_dir(),
+    reason="ROS 1 (roscore, python3-rospy) is not installed: make system-deps",
+)
+
+MONITOR = """
+import json, sys, time
+sys.path.append("/usr/lib/python3/dist-packages")
+import rospy
+from geometry_msgs.msg import PoseStamped
+from std_msgs.msg import String
+out = open(sys.argv[1], "a", buffering=1)
+def note(topic, data):
+    out.write(json.dumps({"topic": topic, "wall": time.time(), "data": data}) + "\\n")
+rospy.init_node("smc_test_monitor", anonymous=True)
+for t in ("/smc/state", "/smc/decision"):
+    rospy.Subscriber(t, String, lambda m, t=t: note(t, m.data), queue_size=1000, tcp_nodelay=True)
+rospy.Subscriber("/smc/poi_target", PoseStamped, lambda m: note("/smc/poi_target",
+    m.header.stamp.to_nsec()), queue_size=10000, tcp_nodelay=True)
+note("ready", "")
+rospy.spin()
+"""
+
+RELAY = """
+import sys
+sys.path.append("/usr/lib/python3/dist-packages")
+import rospy
+from sensor_msgs.msg import Image
+rospy.init_node("camera_relay", anonymous=True)
+pub = rospy.Publisher(sys.argv[2], Image, queue_size=10)
+rospy.Subscriber(sys.argv[1], Image, pub.publish, queue_size=10, tcp_nodelay=True)
+rospy.spin()
+"""
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def ros_env(tmp_path_factory) -> Iterator[dict[str, str]]:
+    """A roscore of its own on 127.0.0.1 and the environment that reaches it."""
+    home = tmp_path_factory.mktemp("ros")
+    port = _free_port()
+    env = {
+        **os.environ,
+        "ROS_MASTER_URI": f"http://127.0.0.1:{port}",
+        "ROS_IP": "127.0.0.1",
+        "ROS_HOSTNAME": "127.0.0.1",
+        "ROS_HOME": str(home),
+        "ROS_LOG_DIR": str(home / "log"),
+        "PYTHONPATH": str(Path(__file__).resolve().parent.parent),
+        "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"),
+    }
+    core = subprocess.Popen(
+        ["roscore", "-p", str(port)],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    master = xmlrpc.client.ServerProxy(env["ROS_MASTER_URI"])
+    deadline = time.monotonic() + 60
+    while True:
+        try:
+            master.getSystemState("/test")
+            break
+        except OSError:
+            assert core.poll() is None and time.monotonic() < deadline, "roscore did not start"
+            time.sleep(0.2)
+    yield env
+    core.send_signal(signal.SIGINT)
+    try:
+        core.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        os.killpg(core.pid, signal.SIGKILL)
+        core.wait()
+
+
+@pytest.fixture(scope="module")
+def trees(tmp_path_factory) -> dict[str, Path]:
+    """bench_pick's and rooms' sample demonstrations compiled."""
+    from smccli.learn.compile import compile_logs
+
+    root = tmp_path_factory.mktemp("ros_trees")
+    out = {}
+    for scene in ("bench_pick", "rooms"):
+        out[scene] = root / f"{scene}.json"
+        compile_logs(sample_log_paths(scene), out[scene])
+    return out
+
+
+def _smc(*args: str) -> list[str]:
+    return [sys.executable, "-m", "smccli.cli", *args]
+
+
+def _map(path: Path, scene: str, **edits: object) -> Path:
+    """The sim's topic map of ``scene``, with ``edits`` (dotted keys) changed."""
+    from smccli.ros.sim_robot import sim_topic_map
+    from smccli.world.scene import load_scene
+
+    data = sim_topic_map(load_scene(scene))
+    for key, value in edits.items():
+        *parents, last = key.split(".")
+        node = data
+        for p in parents:
+            node = node[p]
+        node[last] = value
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+class Robot:
+    """`smc sim --ros1` running: its process and its verdict once stopped."""
+
+    def __init__(self, env: dict[str, str], tmp: Path, scene: str, *args: str) -> None:
+        self.report = tmp / f"sim_{scene}.json"
+        self.log = tmp / f"sim_{scene}.log"
+        with open(self.log, "w") as log:
+            self.proc = subprocess.Popen(
+                _smc("sim", "--ros1", "--scene", scene, "--report", str(self.report), "--force", *args),
+                env=env,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+            )
+        deadline = time.monotonic() + 120
+        while "running" not in self.log.read_text():  # it says so once it publishes
+            assert self.proc.poll() is None and time.monotonic() < deadline, self.log.read_text()
+            time.sleep(0.1)
+
+    def stop(self) -> dict:
+        self.proc.send_signal(signal.SIGINT)
+        self.proc.wait(timeout=60)
+        assert self.proc.returncode == 0, self.log.read_text()
+        return json.loads(self.report.read_text())
+
+
+class Monitor:
+    """A subscriber to /smc/state, /smc/decision and the POI targets, logging to a file."""
+
+    def __init__(self, env: dict[str, str], tmp: Path) -> None:
+        self.path = tmp / "monitor.jsonl"
+        self.path.write_text("")
+        self.proc = subprocess.Popen([sys.executable, "-c", MONITOR, str(self.path)], env=env)
+        self.wait_for(lambda r: r["topic"] == "ready")
+
+    def records(self) -> list[dict]:
+        return [json.loads(line) for line in self.path.read_text().splitlines() if line]
+
+    def wait_for(self, match, timeout: float = 120.0) -> dict:  # noqa: ANN001
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            for r in self.records():
+                if match(r):
+                    return r
+            time.sleep(0.05)
+        raise AssertionError("monitor: nothing matched")
+
+    def close(self) -> None:
+        self.proc.send_signal(signal.SIGINT)
+        self.proc.wait(timeout=20)
+
+
+def _run(env: dict[str, str], tree: Path, topics: Path, report: Path) -> subprocess.Popen:
+    return subprocess.Popen(
+        _smc("run", str(tree), "--ros1", "--topics", str(topics), "--report", str(report)),
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def _same_decisions(ros: list[dict], replay: list[dict]) -> None:
+    assert [d["chosen"] for d in ros] == [d["chosen"] for d in replay]
+    for a, b in zip(ros, replay, strict=True):
+        if b["mapped_goal"] is not None:
+            assert np.allclose(a["mapped_goal"][:3], b["mapped_goal"][:3], atol=1e-3)
+            assert abs(a["mapped_goal"][3] - b["mapped_goal"][3]) < 1e-3
+
+
+@pytest.mark.parametrize(("scene", "seeds"), [("bench_pick", (3, 5)), ("rooms", (3,))])
+def test_tree_runs_the_robot_as_replay(ros_env, trees, tmp_path, scene, seeds) -> None:
+    """End to end over ROS: the task succeeds and every decision (edge, goal within 1 mm)
+    is replay's on the same layout."""
+    from smccli.execute.episode import run_episode
+
+    topics = _map(tmp_path / "map.yaml", scene)
+    for seed in seeds:
+        robot = Robot(ros_env, tmp_path, scene, "--seed", str(seed))
+        report = tmp_path / f"run_{seed}.json"
+        node = _run(ros_env, trees[scene], topics, report)
+        out, err = node.communicate(timeout=600)
+        verdict = robot.stop()
+        assert node.returncode == 0, out + err
+        assert "success: leaf reached" in out
+        assert verdict["success"], verdict["reason"]
+        ros = json.loads(report.read_text())
+        replay = run_episode(trees[scene], seed=seed)
+        assert replay.success
+        _same_decisions(ros["decisions"], [d.to_json() for d in replay.decisions])
+        assert verdict["steps"] == ros["commands"]  # the robot moved by the node's commands only
+        assert len(ros["image_to_command_ms"]) == len(ros["decisions"])
+
+
+def _stopped(monitor: Monitor, node: subprocess.Popen, robot: Robot, stop: str) -> str:
+    """The node ended with ``stop``: its exit code, the reason printed and published, and
+    no command after it (the robot stepped once per command the node counted)."""
+    out, err = node.communicate(timeout=120)
+    assert node.returncode == EXIT_CODES[stop], out + err
+    assert stop in out
+    state = monitor.wait_for(lambda r: r["topic"] == "/smc/state" and "stopped" in r["data"])
+    assert f"stopped ({stop})" in state["data"]
+    verdict = robot.stop()
+    monitor.close()
+    report = json.loads(Path(node.args[node.args.index("--report") + 1]).read_text())
+    assert report["outcome"] == stop and report["exit_code"] == EXIT_CODES[stop]
+    assert verdict["steps"] == report["commands"]  # nothing moved it after the node stopped
+    return out
+
+
+def test_stops_when_the_camera_publisher_dies(ros_env, trees, tmp_path) -> None:
+    sim_map = _map(tmp_path / "sim.yaml", "bench_pick", **{"topics.color": "/sim/color"})
+    topics = _map(tmp_path / "map.yaml", "bench_pick")
+    relay = subprocess.Popen(
+        [sys.executable, "-c", RELAY, "/sim/color", "/camera/color/image_raw"], env=ros_env
+    )
+    robot = Robot(ros_env, tmp_path, "bench_pick", "--seed", "3", "--topics", str(sim_map))
+    monitor = Monitor(ros_env, tmp_path)
+    node = _run(ros_env, trees["bench_pick"], topics, tmp_path / "run.json")
+    monitor.wait_for(lambda r: r["topic"] == "/smc/decision")
+    relay.kill()  # the camera's publisher dies mid-task
+    relay.wait()
+    out = _stopped(monitor, node, robot, "stale_sensors")
+    assert "color on /camera/color/image_raw" in out
+
+
+def test_stops_without_the_poi_transform(ros_env, trees, tmp_path) -> None:
+    topics = _map(
+        tmp_path / "map.yaml", "bench_pick", **{"topics.poi": {"frame": "tool0"}, "run.wait_s": 2.0}
+    )
+    robot = Robot(ros_env, tmp_path, "bench_pick", "--seed", "3")
+    monitor = Monitor(ros_env, tmp_path)
+    node = _run(ros_env, trees["bench_pick"], topics, tmp_path / "run.json")
+    out = _stopped(monitor, node, robot, "tf_lost")
+    assert "tool0" in out
+
+
+@pytest.mark.parametrize(
+    ("white_box", "stop"),
+    [([0.85, -0.05, 0.025, 0.0], "target_unreachable"), (None, "no_contingent_smc")],
+)
+def test_stops_at_a_decision(ros_env, trees, tmp_path, white_box, stop) -> None:
+    """A goal out of reach, or nothing to pick: the policy's stop, before any command."""
+    layout = {"orange_box": [0.45, 0.4, 0.035, 0.0]}
+    if white_box is not None:
+        layout["white_box"] = white_box
+    (tmp_path / "layout.yaml").write_text(yaml.safe_dump(layout))
+    topics = _map(tmp_path / "map.yaml", "bench_pick")
+    robot = Robot(ros_env, tmp_path, "bench_pick", "--layout", str(tmp_path / "layout.yaml"))
+    monitor = Monitor(ros_env, tmp_path)
+    node = _run(ros_env, trees["bench_pick"], topics, tmp_path / "run.json")
+    _stopped(monitor, node, robot, stop)
+    decisions = [r for r in monitor.records() if r["topic"] == "/smc/decision"]
+    assert len(decisions) == 1
+    report = json.loads((tmp_path / "run.json").read_text())
+    assert report["commands"] == 0
+    assert (report["decisions"][0]["chosen"] is None) == (stop == "no_contingent_smc")
+
+
+def test_ctrl_c_stops_the_robot(ros_env, trees, tmp_path) -> None:
+    topics = _map(tmp_path / "map.yaml", "bench_pick")
+    robot = Robot(ros_env, tmp_path, "bench_pick", "--seed", "3")
+    monitor = Monitor(ros_env, tmp_path)
+    node = _run(ros_env, trees["bench_pick"], topics, tmp_path / "run.json")
+    monitor.wait_for(lambda r: r["topic"] == "/smc/poi_target")
+    node.send_signal(signal.SIGINT)
+    _stopped(monitor, node, robot, "interrupted")
