@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from conftest import sample_log_paths
 
 from smccli.ros.node import EXIT_CODES
-from conftest import sample_log_paths
 
 pytestmark = pytest.mark.skipif(
     shutil.which("roscore") is None or not Path("/usr/lib/python3/dist-packages/rospy").is_dir(),
@@ -148,7 +148,16 @@ class Robot:
         self.log = tmp / f"sim_{scene}.log"
         with open(self.log, "w") as log:
             self.proc = subprocess.Popen(
-                _smc("sim", "--ros1", "--scene", scene, "--report", str(self.report), "--force", *args),
+                _smc(
+                    "sim",
+                    "--ros1",
+                    "--scene",
+                    scene,
+                    "--report",
+                    str(self.report),
+                    "--force",
+                    *args,
+                ),
                 env=env,
                 stdout=log,
                 stderr=subprocess.STDOUT,

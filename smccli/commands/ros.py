@@ -4,13 +4,16 @@ robot for it): parse the options, call :mod:`smccli.ros.run`, print how it ended
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.markup import escape
 
 from smccli.commands.console import out, say
 from smccli.errors import SmcError
+
+if TYPE_CHECKING:
+    from smccli.logs.topic_map import TopicMap
 
 Ros1Option = Annotated[bool, typer.Option("--ros1", help="Over ROS 1 (rospy; a roscore runs).")]
 MapOption = Annotated[
@@ -33,7 +36,9 @@ def run(
     ros1: Ros1Option = False,
     topics: MapOption = None,
     report: Annotated[Path | None, typer.Option(help="Report (JSON): decisions, latency.")] = None,
-    max_time: Annotated[float, typer.Option(help="Stop after this long on the robot's clock, in seconds.")] = 300.0,
+    max_time: Annotated[
+        float, typer.Option(help="Stop after this long on the robot's clock, in seconds.")
+    ] = 300.0,
     force: Annotated[bool, typer.Option(help="Overwrite the report.")] = False,
 ) -> None:
     """Run the tree on a robot: its sensors in, POI and gripper commands out, each decision
@@ -46,8 +51,13 @@ def run(
         raise SmcError("smc run needs --topics MAP: which topics the robot reads and takes")
     result = run_ros1(tree, topics, report=report, force=force, max_time=max_time)
     for d in result.decisions:
-        goal = "" if d.mapped_goal is None else " goal " + ", ".join(f"{v:.3f}" for v in d.mapped_goal)
-        out.print(f"t={d.t:.2f} s {escape(d.nodes[0])} -> {escape(d.chosen or 'none')}{goal}", highlight=False)
+        goal = (
+            "" if d.mapped_goal is None else " goal " + ", ".join(f"{v:.3f}" for v in d.mapped_goal)
+        )
+        out.print(
+            f"t={d.t:.2f} s {escape(d.nodes[0])} -> {escape(d.chosen or 'none')}{goal}",
+            highlight=False,
+        )
     colour = "green" if result.outcome == "success" else "bold red"
     out.print(f"[{colour}]{result.outcome}[/]: {escape(result.reason)}", highlight=False)
     raise typer.Exit(result.exit_code)
@@ -70,8 +80,9 @@ def sim(
 
     _middleware(ros1)
 
-    def ready(m: object) -> None:
-        say(f"sim: {scene} running, commands on {escape(str(getattr(m, 'run').command))}")
+    def ready(m: TopicMap) -> None:
+        assert m.run is not None
+        say(f"sim: {scene} running, commands on {escape(str(m.run.command))}")
 
     verdict = sim_ros1(
         scene, seed=seed, layout=layout, topics=topics, report=report, force=force, on_ready=ready

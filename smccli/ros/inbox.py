@@ -139,11 +139,14 @@ class Inbox:
         received; or what is missing (one line)."""
         i = bisect.bisect_right([c[0] for c in self.color], t_ns) - 1
         if i < 0:
-            return f"no colour image on {self.map.topics['color']} at or before t={t_ns / 1e9:.3f} s"
+            return (
+                f"no colour image on {self.map.topics['color']} at or before t={t_ns / 1e9:.3f} s"
+            )
         stamp, frame_id, msg, received = self.color[i]
         depth = min(self.depth, key=lambda d: abs(d[0] - stamp), default=None)
         if depth is None or abs(depth[0] - stamp) > FRAME_MATCH_NS:
-            return f"no depth image on {self.map.topics.get('depth')} within 20 ms of t={stamp / 1e9:.3f} s"
+            depth_topic = self.map.topics.get("depth")
+            return f"no depth image on {depth_topic} within 20 ms of t={stamp / 1e9:.3f} s"
         if self.K is None:
             return f"no camera info on {self.map.topics['camera_info']}"
         T = self.world(frame_id, stamp)
@@ -164,7 +167,9 @@ class Inbox:
         if T is None:
             return f"no transform from {frame_id!r} to {self.map.world_frame!r} (tf_lost)"
         ranges = np.array(msg.ranges, dtype=float)
-        scan = Scan2D(ranges, float(msg.angle_min), float(msg.angle_increment), float(msg.range_max))
+        scan = Scan2D(
+            ranges, float(msg.angle_min), float(msg.angle_increment), float(msg.range_max)
+        )
         return scan, np.array([T[0, 3], T[1, 3], yaw_of(T[:3, :3])])
 
     def weight(self) -> float | None:

@@ -208,7 +208,8 @@ class RobotSensors:
         topics = self.map.topics
         self._wait(
             lambda: self.inbox.joint_stamp is not None,
-            f"no joint states naming {', '.join(self.robot.joint_names)} on {topics['joint_states']}",
+            f"no joint states naming {', '.join(self.robot.joint_names)} on "
+            f"{topics['joint_states']}",
         )
         self._wait(
             lambda: self.inbox.poi(self.now_ns) is not None,
@@ -378,7 +379,8 @@ class RobotSensors:
         frame_id = self.inbox.color[-1][1]
         self._wait(
             lambda: any(abs(d[0] - stamp) <= FRAME_MATCH_NS for d in self.inbox.depth),
-            f"no depth image within 20 ms of t={stamp / 1e9:.2f} s on {self.map.topics.get('depth')}",
+            f"no depth image within 20 ms of t={stamp / 1e9:.2f} s on "
+            f"{self.map.topics.get('depth')}",
         )
         self._wait(
             lambda: self._tf_at(frame_id, stamp),

@@ -17,7 +17,7 @@ from __future__ import annotations
 import sys
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -25,9 +25,11 @@ from smccli.errors import SmcError
 from smccli.logs.topic_map import TopicMap
 from smccli.ros.inbox import Inbox
 from smccli.ros.node import Command
-from smccli.ros.sim_robot import CAMERA_FRAME, LIDAR_FRAME, Readings, SimRobot
 from smccli.world.geometry import matrix_quat, yaw_quat
 from smccli.world.robot import Robot
+
+if TYPE_CHECKING:  # the node's process never loads the simulator
+    from smccli.ros.sim_robot import Readings, SimRobot
 
 DIST_PACKAGES = "/usr/lib/python3/dist-packages"
 DEB_PACKAGES = (
@@ -112,9 +114,9 @@ class Ros1Node:
                     return
                 self.inbox.add(topic, decoded, received)
 
-            self._subs.append(rospy.Subscriber(
-                    topic, rospy.AnyMsg, on_message, queue_size=100, tcp_nodelay=True
-                ))
+            self._subs.append(
+                rospy.Subscriber(topic, rospy.AnyMsg, on_message, queue_size=100, tcp_nodelay=True)
+            )
         run = topic_map.run
         assert run is not None
         self._pose = rospy.Publisher(run.command, PoseStamped, queue_size=100)
@@ -212,10 +214,20 @@ class Ros1Sim:
             "Float64": Float64,
         }
         assert m.run is not None
-        self._subs = [rospy.Subscriber(m.run.command, PoseStamped, self._on_target, queue_size=1000, tcp_nodelay=True)]
+        self._subs = [
+            rospy.Subscriber(
+                m.run.command, PoseStamped, self._on_target, queue_size=1000, tcp_nodelay=True
+            )
+        ]
         if m.run.gripper:
             self._subs.append(
-                rospy.Subscriber(m.run.gripper, JointTrajectory, self._on_gripper, queue_size=1000, tcp_nodelay=True)
+                rospy.Subscriber(
+                    m.run.gripper,
+                    JointTrajectory,
+                    self._on_gripper,
+                    queue_size=1000,
+                    tcp_nodelay=True,
+                )
             )
 
     def _on_target(self, msg: Any) -> None:
@@ -258,9 +270,13 @@ class Ros1Sim:
         js.effort = [float(v) for v in r.joints.effort]
         transforms = [self._tf(stamp, m.poi_frame or "tool", r.poi[:3], yaw_quat(r.poi[3]))]
         if r.frame is not None:
+            from smccli.ros.sim_robot import CAMERA_FRAME
+
             T = r.frame.T_world_camera
             transforms.append(self._tf(stamp, CAMERA_FRAME, T[:3, 3], matrix_quat(T[:3, :3])))
         if r.lidar_pose is not None:
+            from smccli.ros.sim_robot import LIDAR_FRAME
+
             x, y, yaw = r.lidar_pose
             transforms.append(self._tf(stamp, LIDAR_FRAME, [x, y, 0.0], yaw_quat(yaw)))
         self.pubs["tf"].publish(M["TFMessage"](transforms=transforms))
@@ -286,6 +302,8 @@ class Ros1Sim:
         return tr
 
     def _camera(self, stamp: Any, frame: Any) -> None:
+        from smccli.ros.sim_robot import CAMERA_FRAME
+
         M = self.msgs
         h, w = frame.depth.shape
         color = M["Image"](height=h, width=w, encoding="rgb8", step=3 * w)
@@ -313,6 +331,8 @@ class Ros1Sim:
             range_max=float(scan.range_max),
             ranges=[float(v) for v in scan.ranges],
         )
+        from smccli.ros.sim_robot import LIDAR_FRAME
+
         msg.header.stamp, msg.header.frame_id = stamp, LIDAR_FRAME
         self.pubs["lidar"].publish(msg)
 

@@ -41,7 +41,7 @@ def sim_topic_map(scene: Scene) -> dict[str, Any]:
     robot = scene.robot
     topics: dict[str, Any] = {
         "joint_states": "/joint_states",
-        "poi": {"frame": "tool" if robot.arm_joints else "base_link"},
+        "poi": {"frame": "tool" if robot.arm_joints else "base_footprint"},
         "color": "/camera/color/image_raw",
         "depth": "/camera/depth/image_raw",
         "camera_info": "/camera/color/camera_info",
