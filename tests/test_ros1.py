@@ -315,3 +315,30 @@ def test_ctrl_c_stops_the_robot(ros_env, trees, tmp_path) -> None:
     monitor.wait_for(lambda r: r["topic"] == "/smc/poi_target")
     node.send_signal(signal.SIGINT)
     _stopped(monitor, node, robot, "interrupted")
+
+
+def test_without_rospy_one_line_names_the_packages(monkeypatch, tmp_path) -> None:
+    """rospy is looked for at the end of sys.path only; missing, it is an SmcError (exit 2)
+    naming what to install."""
+    from smccli.errors import SmcError
+    from smccli.ros import ros1
+
+    if "rospy" in sys.modules:
+        pytest.skip("rospy is already imported in this process")
+    monkeypatch.setattr(ros1, "DIST_PACKAGES", str(tmp_path))
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if "dist-packages" not in p])
+    with pytest.raises(SmcError, match="apt-get install ros-core python3-rospy"):
+        ros1.import_rospy()
+    assert sys.path[-1] == str(tmp_path)  # appended last: it never shadows the venv
+
+
+def test_a_map_without_run_is_refused(tmp_path) -> None:
+    from smccli.errors import SceneError
+    from smccli.ros.run import run_map
+
+    path = _map(tmp_path / "map.yaml", "bench_pick")
+    data = yaml.safe_load(path.read_text())
+    del data["run"]
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(SceneError, match="no `run:` section"):
+        run_map(path)
