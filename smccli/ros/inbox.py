@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from smccli.logs.decode import latest
 from smccli.logs.ros2_bag import FRAME_MATCH_NS
 from smccli.logs.ros2_images import ros_depth, ros_rgb
 from smccli.logs.tf_buffer import TF_TOPICS, TfBuffer, stamp_ns
@@ -120,7 +121,7 @@ class Inbox:
         if self.map.poi_frame is not None:
             T = self.world(self.map.poi_frame, t_ns)
         else:
-            msg = latest(self.poses, t_ns)
+            msg = latest(list(self.poses), t_ns)
             if msg is None:
                 return None
             W = self.world(msg.header.frame_id, stamp_ns(msg.header.stamp))
@@ -185,9 +186,3 @@ class Inbox:
             "poi": lambda: self.poses[-1][0] if self.poses else None,
         }
         return series[role]()
-
-
-def latest(series: deque[tuple[int, Any]], t_ns: int) -> Any | None:
-    """The value of the last (stamp, value) at or before ``t_ns`` (stamps in order)."""
-    i = bisect.bisect_right([s[0] for s in series], t_ns) - 1
-    return series[i][1] if i >= 0 else None

@@ -172,6 +172,10 @@ class RobotSensors:
         self._body: RobotModel | None = None
         self._near = float(self.model.vis.map.znear * self.model.stat.extent)
         self._image_received: float | None = None
+        """Receipt (wall clock) of the image of the decision just made, until its first
+        command goes out."""
+        self._frame_received: float | None = None
+        """Receipt of the last image read."""
         self._decided_at: float | None = None
         self.latency_s: list[float] = []
         self.commands = 0
@@ -393,8 +397,6 @@ class RobotSensors:
             raise RobotStop("tf_lost" if "tf_lost" in got else "stale_sensors", got)
         frame, self._frame_received = got
         return frame
-
-    _frame_received: float | None = None
 
     def camera_view(self) -> tuple[np.ndarray, np.ndarray, tuple[int, int], float]:
         """K, T_world_camera of the latest image, image shape (h, w), near distance [m]."""
