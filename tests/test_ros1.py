@@ -218,15 +218,24 @@ def _same_decisions(ros: list[dict], replay: list[dict]) -> None:
             assert abs(a["mapped_goal"][3] - b["mapped_goal"][3]) < 1e-3
 
 
-@pytest.mark.parametrize(("scene", "seeds"), [("bench_pick", (3, 5)), ("rooms", (3,))])
-def test_tree_runs_the_robot_as_replay(ros_env, trees, tmp_path, scene, seeds) -> None:
+JOINT_SPACE = {"run": {"arm": "/arm_controller/command", "gripper": "/gripper/command"}}
+"""An arm commanded by joint trajectories instead of POI targets."""
+
+
+@pytest.mark.parametrize(
+    ("scene", "seeds", "edits"),
+    [("bench_pick", (3, 5), {}), ("bench_pick", (7,), JOINT_SPACE), ("rooms", (3,), {})],
+    ids=["bench_pick", "bench_pick-joint-space", "rooms"],
+)
+def test_tree_runs_the_robot_as_replay(ros_env, trees, tmp_path, scene, seeds, edits) -> None:
     """End to end over ROS: the task succeeds and every decision (edge, goal within 1 mm)
-    is replay's on the same layout."""
+    is replay's on the same layout; an arm taking POI targets, or joint targets (the
+    node's Cartesian controller makes them), or a mobile base."""
     from smccli.execute.episode import run_episode
 
-    topics = _map(tmp_path / "map.yaml", scene)
+    topics = _map(tmp_path / "map.yaml", scene, **edits)
     for seed in seeds:
-        robot = Robot(ros_env, tmp_path, scene, "--seed", str(seed))
+        robot = Robot(ros_env, tmp_path, scene, "--seed", str(seed), "--topics", str(topics))
         report = tmp_path / f"run_{seed}.json"
         node = _run(ros_env, trees[scene], topics, report)
         out, err = node.communicate(timeout=600)

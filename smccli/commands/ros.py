@@ -82,7 +82,8 @@ def sim(
 
     def ready(m: TopicMap) -> None:
         assert m.run is not None
-        say(f"sim: {scene} running, commands on {escape(str(m.run.command))}")
+        topics = ", ".join(t for t in (m.run.command, m.run.arm, m.run.gripper) if t)
+        say(f"sim: {scene} running, commands on {escape(topics)}")
 
     verdict = sim_ros1(
         scene, seed=seed, layout=layout, topics=topics, report=report, force=force, on_ready=ready

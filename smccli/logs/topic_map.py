@@ -34,8 +34,10 @@ class RunSpec:
     """The map's ``run`` section: how ``smc run --ros1`` commands the robot and when it
     stops it (``schemas/topic_map.schema.json``)."""
 
-    command: str
-    """geometry_msgs/PoseStamped topic of the POI's target."""
+    command: str | None
+    """geometry_msgs/PoseStamped topic of the POI's target (None: ``arm``)."""
+    arm: str | None = None
+    """trajectory_msgs/JointTrajectory topic of the arm's joint targets (None: ``command``)."""
     gripper: str | None = None
     """trajectory_msgs/JointTrajectory topic of the gripper's fingers (None: not commanded)."""
     stale_s: float = 0.5
@@ -92,10 +94,11 @@ def parse_topic_map(data: dict[str, Any], path: Path | None = None) -> TopicMap:
     world = str(data.get("world_frame", "world"))
     run = None
     if (r := data.get("run")) is not None:
-        topic = _topic(r["command"])
-        gripper = None if r.get("gripper") is None else _topic(r["gripper"])
+        command, arm, gripper = (
+            None if r.get(k) is None else _topic(r[k]) for k in ("command", "arm", "gripper")
+        )
         times = {k: float(r[k]) for k in ("stale_s", "wait_s", "period_s") if k in r}
-        run = RunSpec(topic, gripper, **times)
+        run = RunSpec(command, arm, gripper, **times)
     return TopicMap(path, scene, world, topics, scale, joints, button, poi_frame, run)
 
 

@@ -39,7 +39,7 @@ from smccli.logs.ros2_bag import FRAME_MATCH_NS
 from smccli.logs.topic_map import RunSpec, TopicMap
 from smccli.perception.scan import Scan2D
 from smccli.ros.inbox import Inbox
-from smccli.world.controller import target_rotation
+from smccli.world.controller import CartesianController, target_rotation
 from smccli.world.geometry import matrix_quat, yaw_quat
 from smccli.world.robot_model import RobotModel
 from smccli.world.scene import Scene
@@ -85,6 +85,10 @@ class Command:
     """The gripper's joints (driver names), empty without a gripper command."""
     finger_positions: tuple[float, ...] = ()
     """Their targets [m or rad]."""
+    arm_joints: tuple[str, ...] = ()
+    """The arm's joints (driver names) for a robot commanded in joint space (``run.arm``)."""
+    arm_positions: tuple[float, ...] = ()
+    """Their targets [rad]: the POI target through the robot's Cartesian controller."""
 
 
 class Bus(Protocol):
@@ -129,23 +133,35 @@ class NodeResult:
         }
 
 
-def command_for(cmd: PoiCommand, robot_scene: Scene, m: TopicMap, stamp_ns: int) -> Command:
+def command_for(
+    cmd: PoiCommand,
+    robot_scene: Scene,
+    m: TopicMap,
+    stamp_ns: int,
+    ik: CartesianController | None = None,
+) -> Command:
     """The :class:`Command` of a planned :class:`~smccli.world.sensors.PoiCommand`: an arm's
     target as its tool pointing down (:func:`~smccli.world.controller.target_rotation`), a
-    base's as its heading; the gripper's opening as finger joint targets."""
+    base's as its heading; with ``ik`` (``run.arm``) the arm's joint targets it gives for
+    it; the gripper's opening as finger joint targets."""
     robot = robot_scene.robot
     target = np.asarray(cmd.target, dtype=float)
     yaw = float(target[3])
     q = matrix_quat(target_rotation(yaw)) if robot.arm_joints else yaw_quat(yaw)
+    driver = {ours: theirs for theirs, ours in m.joints.items()}
     joints: tuple[str, ...] = ()
     positions: tuple[float, ...] = ()
     g = robot.gripper
     if g is not None and m.run is not None and m.run.gripper is not None:
-        driver = {ours: theirs for theirs, ours in m.joints.items()}
         joints = tuple(driver.get(j, j) for j in g.joints)
         q_f = g.closed + float(np.clip(cmd.gripper, 0.0, 1.0)) * (g.open - g.closed)
         positions = (q_f,) * len(joints)
-    return Command(stamp_ns, m.world_frame, target[:3].copy(), q, joints, positions)
+    arm: tuple[str, ...] = ()
+    arm_q: tuple[float, ...] = ()
+    if ik is not None:
+        arm = tuple(driver.get(j, j) for j in robot.arm_joints)
+        arm_q = tuple(float(v) for v in ik.update(target))
+    return Command(stamp_ns, m.world_frame, target[:3].copy(), q, joints, positions, arm, arm_q)
 
 
 class RobotSensors:
@@ -179,7 +195,13 @@ class RobotSensors:
         self._decided_at: float | None = None
         self.latency_s: list[float] = []
         self.commands = 0
-        self._last: Command | None = None
+        self._ik: CartesianController | None = None
+        """``run.arm``: the robot's Cartesian controller, turning POI targets into joint
+        targets, started from the measured joints (:meth:`wait_ready`)."""
+        if spec.arm is not None:
+            if not self.robot.arm_joints:
+                raise SmcError(f"robot {self.robot.name!r} has no arm: run.arm means nothing")
+            self._ik = CartesianController(self.model, self.robot, control_period=spec.period_s)
 
     # --- clock and waiting ----------------------------------------------------------------
 
@@ -228,6 +250,10 @@ class RobotSensors:
             self._wait(lambda: bool(self.inbox.scans), f"no scan on {topics['lidar']}")
         with self.inbox.cond:
             self._check()
+            if self._ik is not None:
+                position = self.inbox.joint_state().position
+                names = self.robot.joint_names
+                self._ik.reset(np.array([position[names.index(j)] for j in self.robot.arm_joints]))
 
     def _tf_at(self, frame: str, t_ns: int) -> bool:
         """Whether ``frame``'s chain to the world frame has its transforms up to ``t_ns``
@@ -283,7 +309,7 @@ class RobotSensors:
         if self.bus.interrupted:
             raise RobotStop("interrupted", "interrupted (Ctrl-C)")
         sent = self.now_ns
-        out = command_for(cmd, self.scene, self.map, sent)
+        out = command_for(cmd, self.scene, self.map, sent, self._ik)
         self.bus.send(out)
         self._last = out
         self.commands += 1

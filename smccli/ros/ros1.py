@@ -119,7 +119,12 @@ class Ros1Node:
             )
         run = topic_map.run
         assert run is not None
-        self._pose = rospy.Publisher(run.command, PoseStamped, queue_size=100)
+        self._pose: Any = None
+        self._arm: Any = None
+        if run.arm:  # a joint-space arm: its targets replace the POI's
+            self._arm = rospy.Publisher(run.arm, JointTrajectory, queue_size=100)
+        elif run.command:
+            self._pose = rospy.Publisher(run.command, PoseStamped, queue_size=100)
         self._grip = (
             rospy.Publisher(run.gripper, JointTrajectory, queue_size=100) if run.gripper else None
         )
@@ -131,7 +136,7 @@ class Ros1Node:
     def _wait_connected(self) -> None:
         """Commands go out only once the robot listens (rospy drops what it publishes to
         a topic before its subscribers connect)."""
-        pubs = [p for p in (self._pose, self._grip) if p is not None]
+        pubs = [p for p in (self._pose, self._arm, self._grip) if p]
         deadline = time.monotonic() + self.wait_s
         while any(p.get_num_connections() == 0 for p in pubs):
             if time.monotonic() > deadline or self.interrupted:
@@ -145,22 +150,28 @@ class Ros1Node:
     def send(self, cmd: Command) -> None:
         if not self._connected:
             self._wait_connected()
-        rospy = self.rospy
+        stamp = _stamp(self.rospy, cmd.stamp_ns)
+        if self._grip and cmd.finger_joints:
+            self._grip.publish(self._trajectory(stamp, cmd.finger_joints, cmd.finger_positions))
+        if self._arm:
+            self._arm.publish(self._trajectory(stamp, cmd.arm_joints, cmd.arm_positions))
+            return
         msg = self.PoseStamped()
-        msg.header.stamp = _stamp(rospy, cmd.stamp_ns)
-        msg.header.frame_id = cmd.frame
+        msg.header.stamp, msg.header.frame_id = stamp, cmd.frame
         p, q = msg.pose.position, msg.pose.orientation
         p.x, p.y, p.z = (float(v) for v in cmd.position)
         q.w, q.x, q.y, q.z = (float(v) for v in cmd.quaternion)
-        if self._grip is not None and cmd.finger_joints:
-            from trajectory_msgs.msg import JointTrajectoryPoint
-
-            g = self.JointTrajectory()
-            g.header.stamp = msg.header.stamp
-            g.joint_names = list(cmd.finger_joints)
-            g.points = [JointTrajectoryPoint(positions=list(cmd.finger_positions))]
-            self._grip.publish(g)
         self._pose.publish(msg)
+
+    def _trajectory(self, stamp: Any, joints: tuple[str, ...], positions: tuple[float, ...]) -> Any:
+        """A JointTrajectory of one point: ``positions`` of ``joints`` now."""
+        from trajectory_msgs.msg import JointTrajectoryPoint
+
+        msg = self.JointTrajectory()
+        msg.header.stamp = stamp
+        msg.joint_names = list(joints)
+        msg.points = [JointTrajectoryPoint(positions=[float(v) for v in positions])]
+        return msg
 
     def decision(self, text: str) -> None:
         self._decision.publish(self.String(data=text))
@@ -214,25 +225,26 @@ class Ros1Sim:
             "Float64": Float64,
         }
         assert m.run is not None
-        self._subs = [
-            rospy.Subscriber(
-                m.run.command, PoseStamped, self._on_target, queue_size=1000, tcp_nodelay=True
-            )
+        inputs = [
+            (m.run.command, PoseStamped, self._on_target),
+            (m.run.arm, JointTrajectory, self._on_arm),
+            (m.run.gripper, JointTrajectory, self._on_gripper),
         ]
-        if m.run.gripper:
-            self._subs.append(
-                rospy.Subscriber(
-                    m.run.gripper,
-                    JointTrajectory,
-                    self._on_gripper,
-                    queue_size=1000,
-                    tcp_nodelay=True,
-                )
-            )
+        self._subs = [
+            rospy.Subscriber(topic, kind, call, queue_size=1000, tcp_nodelay=True)
+            for topic, kind, call in inputs
+            if topic
+        ]
 
     def _on_target(self, msg: Any) -> None:
         p, q = msg.pose.position, msg.pose.orientation
         self.robot.on_target(msg.header.stamp.to_nsec(), [p.x, p.y, p.z], [q.w, q.x, q.y, q.z])
+
+    def _on_arm(self, msg: Any) -> None:
+        if msg.points:
+            self.robot.on_arm(
+                msg.header.stamp.to_nsec(), list(msg.joint_names), list(msg.points[0].positions)
+            )
 
     def _on_gripper(self, msg: Any) -> None:
         if msg.points:
@@ -255,7 +267,7 @@ class Ros1Sim:
                         break
                     robot.cond.wait(left)
                     cmd = robot.next_command()
-            self.publish(robot.step(cmd) if cmd is not None else robot.readings(sensing=True))
+            self.publish(robot.step(*cmd) if cmd is not None else robot.readings(sensing=True))
 
     def publish(self, r: Readings) -> None:
         rospy, M, m = self.rospy, self.msgs, self.robot.map

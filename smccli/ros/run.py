@@ -23,7 +23,8 @@ def run_map(topics: Path) -> TopicMap:
     if m.run is None:
         raise SceneError(
             f"{topics}: no `run:` section: smc run needs run.command (the POI's "
-            "geometry_msgs/PoseStamped target topic) and, with a gripper, run.gripper"
+            "geometry_msgs/PoseStamped target topic) or run.arm (the arm's "
+            "trajectory_msgs/JointTrajectory) and, with a gripper, run.gripper"
         )
     return m
 

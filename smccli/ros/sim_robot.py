@@ -81,7 +81,11 @@ class SimRobot:
         self.sim.start_camera()
         self.cond = threading.Condition()
         self.targets: dict[int, np.ndarray] = {}
+        """Stamp [ns] -> POI target ``[x, y, z, yaw]`` (``run.command``)."""
+        self.arm: dict[int, np.ndarray] = {}
+        """Stamp [ns] -> the arm's joint targets in the robot file's order (``run.arm``)."""
         self.grips: dict[int, float] = {}
+        self._last: tuple[PoiCommand, np.ndarray | None] | None = None
         self.steps = 0
         self.camera_every = max(1, round(1 / (scene.camera.rate * self.sim.control_period)))
         """Control periods between two camera images while the robot moves."""
@@ -112,23 +116,42 @@ class SimRobot:
             self.grips[stamp_ns] = g.opening(np.array(q))
             self.cond.notify_all()
 
-    def next_command(self) -> PoiCommand | None:
-        """The oldest complete command (lock held): a target, and its gripper command when
-        the robot takes one; None when none is complete."""
-        for stamp in sorted(self.targets):
+    def on_arm(self, stamp_ns: int, names: list[str], positions: list[float]) -> None:
+        """The arm's joint targets for the period ``stamp_ns`` (driver names: renamed by
+        the map's ``joints``); a message without every arm joint is ignored."""
+        given = dict(zip((self.map.joints.get(n, n) for n in names), positions, strict=False))
+        joints = self.scene.robot.arm_joints
+        if not joints or any(j not in given for j in joints):
+            return
+        with self.cond:
+            self.arm[stamp_ns] = np.array([given[j] for j in joints], dtype=float)
+            self.cond.notify_all()
+
+    def next_command(self) -> tuple[PoiCommand, np.ndarray | None] | None:
+        """The oldest complete command (lock held): a POI target or the arm's joint
+        targets, and its gripper command when the robot takes one; None when none is
+        complete. Older incomplete ones are dropped (superseded)."""
+        pending = self.arm if self.arm else self.targets
+        for stamp in sorted(pending):
             if self.takes_gripper and stamp not in self.grips:
                 continue
-            target = self.targets.pop(stamp)
+            value = pending.pop(stamp)
             self._grip = self.grips.pop(stamp, self._grip)
-            for old in [s for s in self.targets if s < stamp]:
-                del self.targets[old]  # superseded
-            return PoiCommand(self.sim.t, target, self._grip)
+            for old in [s for s in pending if s < stamp]:
+                del pending[old]
+            if pending is self.arm:
+                return PoiCommand(self.sim.t, self.sim.poi(), self._grip), value
+            return PoiCommand(self.sim.t, value, self._grip), None
         return None
 
-    def step(self, cmd: PoiCommand) -> Readings:
-        """Execute one control period of ``cmd``; the readings after it (the camera and
-        lidar at their rate)."""
-        self.sensors.step(cmd)
+    def step(self, cmd: PoiCommand, arm_q: np.ndarray | None = None) -> Readings:
+        """Execute one control period of ``cmd`` (or of the arm's joint targets ``arm_q``);
+        the readings after it (the camera and lidar at their rate)."""
+        if arm_q is None:
+            self.sensors.step(cmd)
+        else:  # the driver hands joint targets to the servos
+            self.sim.step(cmd, arm_q=arm_q)
+        self._last = (cmd, arm_q)
         self.steps += 1
         return self.readings(sensing=self.steps % self.camera_every == 0)
 
@@ -147,7 +170,11 @@ class SimRobot:
         success criterion from the simulator's truth (evaluation only)."""
         from smccli.world.truth import Truth
 
-        self.sim.settle(settle_s)
+        if self._last is not None and self._last[1] is not None:  # hold the joint targets
+            for _ in range(round(settle_s / self.sim.control_period)):
+                self.sim.step(*self._last)  # type: ignore[arg-type]
+        else:
+            self.sim.settle(settle_s)
         truth = Truth(self.sim)
         success = truth.success()
         final = {o.name: [float(v) for v in truth.object_pose(o.name)] for o in self.scene.objects}
