@@ -222,15 +222,28 @@ JOINT_SPACE = {"run": {"arm": "/arm_controller/command", "gripper": "/gripper/co
 """An arm commanded by joint trajectories instead of POI targets."""
 
 
+COMPRESSED = {
+    "topics.color": "/camera/color/image_raw/compressed",
+    "topics.depth": "/camera/depth/image_raw/compressedDepth",
+}
+"""image_transport's compressed colour (PNG) and compressedDepth (16UC1 PNG, millimetres)."""
+
+
 @pytest.mark.parametrize(
     ("scene", "seeds", "edits"),
-    [("bench_pick", (3, 5), {}), ("bench_pick", (7,), JOINT_SPACE), ("rooms", (3,), {})],
-    ids=["bench_pick", "bench_pick-joint-space", "rooms"],
+    [
+        ("bench_pick", (3, 5), {}),
+        ("bench_pick", (7,), JOINT_SPACE),
+        ("bench_pick", (9,), COMPRESSED),
+        ("rooms", (3,), {}),
+    ],
+    ids=["bench_pick", "bench_pick-joint-space", "bench_pick-compressed", "rooms"],
 )
 def test_tree_runs_the_robot_as_replay(ros_env, trees, tmp_path, scene, seeds, edits) -> None:
     """End to end over ROS: the task succeeds and every decision (edge, goal within 1 mm)
     is replay's on the same layout; an arm taking POI targets, or joint targets (the
-    node's Cartesian controller makes them), or a mobile base."""
+    node's Cartesian controller makes them), its camera raw or compressed (depth in
+    millimetres: goals move by a fraction of one), or a mobile base."""
     from smccli.execute.episode import run_episode
 
     topics = _map(tmp_path / "map.yaml", scene, **edits)
@@ -351,3 +364,37 @@ def test_a_map_without_run_is_refused(tmp_path) -> None:
     path.write_text(yaml.safe_dump(data))
     with pytest.raises(SceneError, match="no `run:` section"):
         run_map(path)
+
+
+def test_joint_states_of_two_publishers_merge_by_name(tmp_path) -> None:
+    """An arm's driver and its gripper's publish on one topic: the robot's clock starts
+    once every joint was heard, the gripper's joints renamed by the map's ``joints``."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from smccli.logs.topic_map import load_topic_map
+    from smccli.ros.inbox import Inbox
+    from smccli.world.scene import load_scene
+
+    robot = load_scene("bench_pick").robot
+    assert robot.gripper is not None
+    renamed = {f"driver_{j}": j for j in robot.gripper.joints}
+    path = _map(tmp_path / "map.yaml", "bench_pick", joints=renamed)
+    inbox = Inbox(load_topic_map(path), robot)
+    store = get_typestore(Stores.ROS1_NOETIC)
+    JointState = store.types["sensor_msgs/msg/JointState"]
+    Header, Time = store.types["std_msgs/msg/Header"], store.types["builtin_interfaces/msg/Time"]
+
+    def message(names: list[str], positions: list[float], ns: int) -> object:
+        values = np.array(positions, dtype=float)
+        header = Header(seq=0, stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id="")
+        return JointState(header, names, values, np.zeros_like(values), np.array([]))
+
+    arm = list(robot.arm_joints)
+    inbox.add("/joint_states", message(arm, [0.1 * i for i in range(len(arm))], 10**9), 0.0)
+    assert inbox.joint_stamp is None  # the fingers are not heard yet
+    fingers = list(renamed)
+    inbox.add("/joint_states", message(fingers, [0.02] * len(fingers), 10**9 + 5_000_000), 0.0)
+    assert inbox.joint_stamp == 10**9 + 5_000_000
+    js = inbox.joint_state()
+    assert js.names == robot.joint_names
+    assert np.allclose(js.position, [0.1 * i for i in range(len(arm))] + [0.02] * len(fingers))

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from smccli.errors import SmcError
+from smccli.logs.ros2_images import COMPRESSED_DEPTH_HEADER
 from smccli.logs.topic_map import TopicMap
 from smccli.ros.inbox import Inbox
 from smccli.ros.node import Command
@@ -79,6 +80,24 @@ class Ros1Decoder:
             text = str(msg._connection_header.get("message_definition", ""))
             self.store.register(get_types_from_msg(text, name))
         return self.store.deserialize_ros1(bytes(msg._buff), name)
+
+
+def _compressed(topic: str) -> bool:
+    """A topic image_transport's plugins name (``.../compressed``, ``.../compressedDepth``):
+    the simulated camera publishes a CompressedImage there (PNG: lossless colour)."""
+    return topic.rstrip("/").rsplit("/", 1)[-1] in ("compressed", "compressedDepth")
+
+
+def _image_type(topic: str, raw: Any, compressed: Any) -> Any:
+    return compressed if _compressed(topic) else raw
+
+
+def _png(image: np.ndarray) -> bytes:
+    import cv2
+
+    ok, data = cv2.imencode(".png", image)
+    assert ok
+    return bytes(data)
 
 
 def _stamp(rospy: Any, t_ns: int) -> Any:
@@ -193,7 +212,7 @@ class Ros1Sim:
         rospy = self.rospy = import_rospy()
         from geometry_msgs.msg import PoseStamped
         from rosgraph_msgs.msg import Clock
-        from sensor_msgs.msg import CameraInfo, Image, JointState, LaserScan
+        from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState, LaserScan
         from std_msgs.msg import Float64
         from tf2_msgs.msg import TFMessage
         from trajectory_msgs.msg import JointTrajectory
@@ -207,8 +226,10 @@ class Ros1Sim:
             "clock": pub("/clock", Clock, queue_size=10),
             "joint_states": pub(t["joint_states"], JointState, queue_size=100),
             "tf": pub("/tf", TFMessage, queue_size=100),
-            "color": pub(t["color"], Image, queue_size=10),
-            "depth": pub(t["depth"], Image, queue_size=10),
+            **{
+                role: pub(t[role], _image_type(t[role], Image, CompressedImage), queue_size=10)
+                for role in ("color", "depth")
+            },
             "camera_info": pub(t["camera_info"], CameraInfo, queue_size=10),
         }
         if "lidar" in t:
@@ -220,6 +241,7 @@ class Ros1Sim:
             "JointState": JointState,
             "TFMessage": TFMessage,
             "Image": Image,
+            "CompressedImage": CompressedImage,
             "CameraInfo": CameraInfo,
             "LaserScan": LaserScan,
             "Float64": Float64,
@@ -316,12 +338,24 @@ class Ros1Sim:
     def _camera(self, stamp: Any, frame: Any) -> None:
         from smccli.ros.sim_robot import CAMERA_FRAME
 
-        M = self.msgs
+        M, topics = self.msgs, self.robot.map.topics
         h, w = frame.depth.shape
-        color = M["Image"](height=h, width=w, encoding="rgb8", step=3 * w)
-        color.data = np.ascontiguousarray(frame.rgb, dtype=np.uint8).tobytes()
-        depth = M["Image"](height=h, width=w, encoding="32FC1", step=4 * w)
-        depth.data = np.ascontiguousarray(frame.depth, dtype="<f4").tobytes()
+        if _compressed(topics["color"]):
+            color = M["CompressedImage"](format="rgb8; png compressed bgr8")
+            color.data = _png(np.ascontiguousarray(frame.rgb[..., ::-1]))
+        else:
+            color = M["Image"](height=h, width=w, encoding="rgb8", step=3 * w)
+            color.data = np.ascontiguousarray(frame.rgb, dtype=np.uint8).tobytes()
+        if _compressed(topics["depth"]):
+            # image_transport's compressedDepth: a header, then a 16-bit PNG in the map's
+            # units (millimetres by default).
+            units = np.round(frame.depth / self.robot.map.depth_scale)
+            mm = np.clip(np.nan_to_num(units, posinf=0.0), 0, 65535).astype(np.uint16)
+            depth = M["CompressedImage"](format="16UC1; compressedDepth png")
+            depth.data = COMPRESSED_DEPTH_HEADER.pack(0, 0.0, 0.0) + _png(mm)
+        else:
+            depth = M["Image"](height=h, width=w, encoding="32FC1", step=4 * w)
+            depth.data = np.ascontiguousarray(frame.depth, dtype="<f4").tobytes()
         info = M["CameraInfo"](height=h, width=w, distortion_model="plumb_bob")
         info.K = [float(v) for v in np.asarray(frame.K).reshape(9)]
         info.P = [*info.K[:3], 0.0, *info.K[3:6], 0.0, *info.K[6:], 0.0]
