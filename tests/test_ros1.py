@@ -398,3 +398,60 @@ def test_joint_states_of_two_publishers_merge_by_name(tmp_path) -> None:
     js = inbox.joint_state()
     assert js.names == robot.joint_names
     assert np.allclose(js.position, [0.1 * i for i in range(len(arm))] + [0.02] * len(fingers))
+
+
+def test_a_transform_that_stops_moving_stops_the_robot(tmp_path) -> None:
+    """The POI's moving transform not updated for longer than ``stale_s`` on the robot's
+    clock while the joints and the camera keep coming: tf_lost. (The node's checks, with
+    the messages handed in directly instead of over a master.)"""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    from smccli.logs.topic_map import load_topic_map
+    from smccli.ros.inbox import Inbox
+    from smccli.ros.node import RobotSensors, RobotStop
+    from smccli.world.scene import load_scene
+
+    scene = load_scene("bench_pick")
+    m = load_topic_map(_map(tmp_path / "map.yaml", "bench_pick"))
+    assert m.run is not None
+    store = get_typestore(Stores.ROS1_NOETIC)  # as the node's decoder: TFMessage registered
+    tf_text = "geometry_msgs/TransformStamped[] transforms"
+    store.register(get_types_from_msg(tf_text, "tf2_msgs/msg/TFMessage"))
+    T = store.types
+
+    class Bus:  # the node's middleware, in process
+        interrupted = False
+        inbox = Inbox(m, scene.robot)
+
+    def header(ns: int, frame: str = "world") -> object:
+        stamp = T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+        return T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame)
+
+    def tf(ns: int, child: str) -> object:
+        v, q = T["geometry_msgs/msg/Vector3"](0.4, 0, 0.3), T["geometry_msgs/msg/Quaternion"]
+        tr = T["geometry_msgs/msg/Transform"](v, q(0, 0, 0, 1))
+        stamped = T["geometry_msgs/msg/TransformStamped"](header(ns), child, tr)
+        return T["tf2_msgs/msg/TFMessage"]([stamped])
+
+    def readings(ns: int) -> None:
+        q = np.zeros(len(scene.robot.joint_names))
+        names = list(scene.robot.joint_names)
+        image = T["sensor_msgs/msg/Image"]
+        pixels = np.zeros(4, dtype=np.uint8)
+        for topic in ("/camera/color/image_raw", "/camera/depth/image_raw"):
+            msg = image(header(ns, "camera"), 1, 1, "32FC1", 0, 4, pixels)
+            Bus.inbox.add(topic, msg, 0.0)
+        msg = T["sensor_msgs/msg/JointState"](header(ns), names, q, q, q)
+        Bus.inbox.add("/joint_states", msg, 0.0)
+
+    sensors = RobotSensors(Bus(), scene, m, m.run)  # type: ignore[arg-type]
+    Bus.inbox.add("/tf_static", tf(0, "camera"), 0.0)
+    Bus.inbox.add("/tf", tf(10**9, "tool"), 0.0)
+    readings(10**9)
+    with Bus.inbox.cond:
+        sensors._check()
+    assert sensors.poi()[:3].tolist() == [0.4, 0.0, 0.3]
+    readings(2 * 10**9)  # a second later: the tool's transform did not come again
+    with pytest.raises(RobotStop) as stop, Bus.inbox.cond:
+        sensors._check()
+    assert stop.value.stop == "tf_lost" and "'tool'" in stop.value.reason
