@@ -330,8 +330,10 @@ def test_stops_at_a_decision(ros_env, trees, tmp_path, white_box, stop) -> None:
 
 
 def test_ctrl_c_stops_the_robot(ros_env, trees, tmp_path) -> None:
-    topics = _map(tmp_path / "map.yaml", "bench_pick")
-    robot = Robot(ros_env, tmp_path, "bench_pick", "--seed", "3")
+    topics = tmp_path / "served.yaml"  # the map the sim says it serves
+    robot = Robot(ros_env, tmp_path, "bench_pick", "--seed", "3", "--write-map", str(topics))
+    expected = _map(tmp_path / "map.yaml", "bench_pick")
+    assert yaml.safe_load(topics.read_text()) == yaml.safe_load(expected.read_text())
     monitor = Monitor(ros_env, tmp_path)
     node = _run(ros_env, trees["bench_pick"], topics, tmp_path / "run.json")
     monitor.wait_for(lambda r: r["topic"] == "/smc/poi_target")

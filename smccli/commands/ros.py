@@ -72,7 +72,11 @@ def sim(
     ] = None,
     topics: MapOption = None,
     report: Annotated[Path | None, typer.Option(help="Verdict at the end (JSON).")] = None,
-    force: Annotated[bool, typer.Option(help="Overwrite the report.")] = False,
+    write_map: Annotated[
+        Path | None,
+        typer.Option(help="Write the topic map it serves (for smc run --topics).", dir_okay=False),
+    ] = None,
+    force: Annotated[bool, typer.Option(help="Overwrite the report and the map.")] = False,
 ) -> None:
     """Simulate a scene as a ROS robot (camera, joints, TF, lidar) that executes POI and
     gripper commands, until Ctrl-C or SIGTERM; then score the task."""
@@ -86,7 +90,14 @@ def sim(
         say(f"sim: {scene} running, commands on {escape(topics)}")
 
     verdict = sim_ros1(
-        scene, seed=seed, layout=layout, topics=topics, report=report, force=force, on_ready=ready
+        scene,
+        seed=seed,
+        layout=layout,
+        topics=topics,
+        report=report,
+        force=force,
+        on_ready=ready,
+        write_map=write_map,
     )
     colour = "green" if verdict["success"] else "bold red"
     ok = "success" if verdict["success"] else "failure"

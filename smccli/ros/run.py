@@ -10,6 +10,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from smccli.errors import SceneError, SmcError
 from smccli.logs.topic_map import TopicMap, load_topic_map, parse_topic_map
 from smccli.outputs import check_output, write_atomic
@@ -80,21 +82,30 @@ def sim_ros1(
     report: Path | None = None,
     force: bool = False,
     on_ready: Callable[[TopicMap], None] | None = None,
+    write_map: Path | None = None,
 ) -> dict[str, Any]:
     """``smc sim --ros1 --scene S``: the scene as a ROS robot (:class:`SimRobot`) on the
     layout file or the seed's layout (as ``smc replay``'s), on the topics of ``topics``
     (default :func:`~smccli.ros.sim_robot.sim_topic_map`), until Ctrl-C or SIGTERM; then
-    the scene settles and is scored. Returns the verdict (written to ``report``)."""
+    the scene settles and is scored. Returns the verdict (written to ``report``).
+    ``write_map``: where to write the default map (the one ``smc run`` then takes)."""
     from smccli.execute.episode import layout_for
     from smccli.ros.ros1 import Ros1Sim
     from smccli.world.layout import load_layout_file
     from smccli.world.scene import load_scene
 
-    if report is not None:
-        check_output(report, force=force)
+    for out in (report, write_map):
+        if out is not None:
+            check_output(out, force=force)
     scene = load_scene(scene_name)
     lay = load_layout_file(layout, scene) if layout is not None else layout_for(scene, seed)
-    m = load_topic_map(topics) if topics is not None else parse_topic_map(sim_topic_map(scene))
+    if topics is not None:
+        m = load_topic_map(topics)
+    else:
+        data = sim_topic_map(scene)
+        m = parse_topic_map(data)
+        if write_map is not None:
+            write_atomic(write_map, yaml.safe_dump(data, sort_keys=False))
     if m.run is None:
         raise SceneError(f"{topics}: no `run:` section: the sim takes its commands there")
     robot = SimRobot(scene, lay, m)
