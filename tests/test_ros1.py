@@ -109,12 +109,12 @@ def ros_env(tmp_path_factory) -> Iterator[dict[str, str]]:
 
 @pytest.fixture(scope="module")
 def trees(tmp_path_factory) -> dict[str, Path]:
-    """bench_pick's and rooms' sample demonstrations compiled."""
+    """bench_pick's, weigh_sort's (a scale) and rooms' sample demonstrations compiled."""
     from smccli.learn.compile import compile_logs
 
     root = tmp_path_factory.mktemp("ros_trees")
     out = {}
-    for scene in ("bench_pick", "rooms"):
+    for scene in ("bench_pick", "weigh_sort", "rooms"):
         out[scene] = root / f"{scene}.json"
         compile_logs(sample_log_paths(scene), out[scene])
     return out
@@ -235,15 +235,16 @@ COMPRESSED = {
         ("bench_pick", (3, 5), {}),
         ("bench_pick", (7,), JOINT_SPACE),
         ("bench_pick", (9,), COMPRESSED),
+        ("weigh_sort", (3,), {}),
         ("rooms", (3,), {}),
     ],
-    ids=["bench_pick", "bench_pick-joint-space", "bench_pick-compressed", "rooms"],
+    ids=["bench_pick", "bench_pick-joint-space", "bench_pick-compressed", "weigh_sort", "rooms"],
 )
 def test_tree_runs_the_robot_as_replay(ros_env, trees, tmp_path, scene, seeds, edits) -> None:
     """End to end over ROS: the task succeeds and every decision (edge, goal within 1 mm)
     is replay's on the same layout; an arm taking POI targets, or joint targets (the
     node's Cartesian controller makes them), its camera raw or compressed (depth in
-    millimetres: goals move by a fraction of one), or a mobile base."""
+    millimetres: goals move by a fraction of one), a scale's weight, or a mobile base."""
     from smccli.execute.episode import run_episode
 
     topics = _map(tmp_path / "map.yaml", scene, **edits)
