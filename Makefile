@@ -10,8 +10,11 @@ export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 # Debian packages: libusb for open3d, Mesa EGL for headless rendering, Xvfb + xdotool +
 # GLFW for the viewer test, Chromium for the web viewer test (Playwright drives it; it
-# downloads no browser of its own).
-DEB_PKGS := libusb-1.0-0 libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri libglfw3 xvfb xdotool chromium
+# downloads no browser of its own); ROS 1 (roscore, rospy and the messages) for `smc run
+# --ros1` and `smc sim --ros1` (tests/test_ros1.py).
+DEB_PKGS := libusb-1.0-0 libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri libglfw3 xvfb xdotool chromium \
+  ros-core python3-rospy python3-std-msgs python3-sensor-msgs python3-geometry-msgs \
+  python3-trajectory-msgs python3-tf2-msgs python3-rosgraph-msgs
 
 .PHONY: setup models system-deps test test-durations test-fast test-under-load demo bench sample-logs viewer-shots lint clean
 
@@ -101,6 +104,7 @@ bench: setup
 	$(PY) -m smccli.bench.cluster
 	$(PY) -m smccli.bench.learning
 	$(PY) -m smccli.bench.look
+	$(PY) -m smccli.bench.ros1
 
 lint: setup
 	$(VENV)/bin/ruff check smccli tests

@@ -17,7 +17,17 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from smccli.commands import catalog, compile, doctor, export, inspect, record, replay, verify
+from smccli.commands import (
+    catalog,
+    compile,
+    doctor,
+    export,
+    inspect,
+    record,
+    replay,
+    ros,
+    verify,
+)
 from smccli.commands.console import err, one_line, out, say, warn
 from smccli.errors import SmcError
 
@@ -39,6 +49,8 @@ app.command()(verify.verify)
 app.command()(replay.replay)
 app.command()(inspect.inspect)
 app.command()(doctor.doctor)
+app.command()(ros.run)
+app.command()(ros.sim)
 
 
 @app.command("topics")

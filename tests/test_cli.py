@@ -41,6 +41,9 @@ def test_scenes_lists_objects_sensors_and_variants():
         ),
         (("replay", "/nonexistent/tree.json"), "tree.json"),
         (("compile", "/nonexistent/demo.mcap", "-o", "/tmp/never_tree.json"), "demo.mcap"),
+        (("run", "tree.json", "--ros1", "--topics", "/nonexistent/map.yaml"), "map.yaml"),
+        (("run", "tree.json", "--topics", "map.yaml"), "--ros1"),
+        (("sim", "--ros1", "--scene", "no_such_scene"), "no_such_scene"),
     ],
 )
 def test_expected_failures_are_one_line_exit_2(args, needle):

@@ -20,7 +20,9 @@ ALLOWED = {
     # Teaching during replay records the operator (execute/teach.py, docs/layout.md).
     "execute": {"world", "logs", "perception", "learn", "record"},
     "inspect": {"world", "logs", "perception", "learn"},
-    "bench": {"world", "logs", "perception", "learn", "record", "execute", "inspect"},
+    # smc run and smc sim over ROS: the executor's loop on a robot's topics.
+    "ros": {"world", "logs", "perception", "learn", "execute"},
+    "bench": {"world", "logs", "perception", "learn", "record", "execute", "inspect", "ros"},
 }
 BOTTOM = {"errors", "schemas", "outputs", "workers", "__init__", "__version__"}
 
@@ -72,6 +74,8 @@ CONTROL_EXECUTE = [
 """The modules of ``execute/`` that run Algorithm 2 (the rest is the harness around it)."""
 CONTROL = [
     *(PACKAGE / "execute" / f"{name}.py" for name in CONTROL_EXECUTE),
+    PACKAGE / "ros" / "node.py",
+    PACKAGE / "ros" / "inbox.py",
     *sorted((PACKAGE / "perception").rglob("*.py")),
     *sorted((PACKAGE / "learn").rglob("*.py")),
 ]

@@ -175,6 +175,8 @@ class Draft:
             f"# Topic map drafted by `smc topics` from {self.bag}: check every line.",
             "# scene: the scene the bag was recorded in, with its robot (a built-in name, or the",
             "# path of a scene.yaml relative to this file). Then: smc doctor BAG --topics MAP.",
+            "# To run a tree on the robot (smc run --ros1) add a run: section: run.command",
+            "# (PoseStamped) or run.arm (JointTrajectory), run.gripper: docs/on_a_robot.md.",
             *(f"# note: {n}" for n in self.notes),
         ]
         return "\n".join(head) + "\n" + yaml.safe_dump(self.data, sort_keys=False)

@@ -54,6 +54,32 @@ class TfBuffer:
                 break
         return sorted(times)
 
+    def freshness(self, frame: str) -> tuple[bool, int | None]:
+        """Whether ``frame`` reaches the world frame, and the stamp [ns] of the stalest
+        moving link's newest transform on the way (None: static links only): a chain is
+        only as fresh as its stalest moving link."""
+        oldest: int | None = None
+        frame = frame.lstrip("/")
+        for _ in range(32):
+            if frame == self.world:
+                return True, oldest
+            if frame in self._static:
+                frame = self._static[frame][0]
+            elif frame in self._dynamic:
+                stamps, values = self._dynamic[frame]
+                oldest = stamps[-1] if oldest is None else min(oldest, stamps[-1])
+                frame = values[-1][0]
+            else:
+                return False, oldest
+        return False, oldest
+
+    def prune(self, keep: int) -> None:
+        """Keep only each moving link's last ``keep`` transforms (a live robot's buffer
+        would grow without end)."""
+        for times, values in self._dynamic.values():
+            if len(times) > 2 * keep:
+                del times[:-keep], values[:-keep]
+
     def lookup(self, frame: str, t_ns: int) -> np.ndarray | None:
         """T_world_frame at ``t_ns`` (the latest transform of each link at or before it, else
         the first one), or None when the chain does not reach the world frame."""

@@ -30,6 +30,25 @@ ROLE_OF = {native: role for role, (native, _) in reversed(ROLES.items())}
 
 
 @dataclass(frozen=True, slots=True)
+class RunSpec:
+    """The map's ``run`` section: how ``smc run --ros1`` commands the robot and when it
+    stops it (``schemas/topic_map.schema.json``)."""
+
+    command: str | None
+    """geometry_msgs/PoseStamped topic of the POI's target (None: ``arm``)."""
+    arm: str | None = None
+    """trajectory_msgs/JointTrajectory topic of the arm's joint targets (None: ``command``)."""
+    gripper: str | None = None
+    """trajectory_msgs/JointTrajectory topic of the gripper's fingers (None: not commanded)."""
+    stale_s: float = 0.5
+    """A needed sensor whose newest stamp is older than this (robot clock) stops it [s]."""
+    wait_s: float = 5.0
+    """Longest wall-clock wait for the next joint state or a fresh image [s]."""
+    period_s: float = 0.01
+    """Control period [s]."""
+
+
+@dataclass(frozen=True, slots=True)
 class TopicMap:
     """A parsed, checked topic map."""
 
@@ -49,6 +68,8 @@ class TopicMap:
     """The button of a ``sensor_msgs/Joy`` marks topic whose press is a mark."""
     poi_frame: str | None = None
     """The POI as a TF frame (``poi: {frame: tool0}``) when no topic holds its pose."""
+    run: RunSpec | None = None
+    """The ``run`` section (``smc run --ros1``), None when the map has none."""
 
 
 def parse_topic_map(data: dict[str, Any], path: Path | None = None) -> TopicMap:
@@ -71,7 +92,19 @@ def parse_topic_map(data: dict[str, Any], path: Path | None = None) -> TopicMap:
     joints = {str(k): str(v) for k, v in (data.get("joints") or {}).items()}
     _check_joints(joints, path)
     world = str(data.get("world_frame", "world"))
-    return TopicMap(path, scene, world, topics, scale, joints, button, poi_frame)
+    run = None
+    if (r := data.get("run")) is not None:
+        command, arm, gripper = (
+            None if r.get(k) is None else _topic(r[k]) for k in ("command", "arm", "gripper")
+        )
+        times = {k: float(r[k]) for k in ("stale_s", "wait_s", "period_s") if k in r}
+        run = RunSpec(command, arm, gripper, **times)
+    return TopicMap(path, scene, world, topics, scale, joints, button, poi_frame, run)
+
+
+def _topic(value: Any) -> str:
+    """A ``$defs/topic`` value: the name, or a mapping holding it."""
+    return str(value["topic"] if isinstance(value, dict) else value)
 
 
 def _check_joints(joints: dict[str, str], path: Path | None) -> None:

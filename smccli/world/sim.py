@@ -310,18 +310,24 @@ class Sim:
         """Simulation time [s]."""
         return float(self.data.time)
 
-    def step(self, cmd: PoiCommand) -> None:
+    def step(self, cmd: PoiCommand, arm_q: np.ndarray | None = None) -> None:
         """Advance one control period (10 ms) towards ``cmd``.
 
         An arm's POI target goes through the Cartesian controller; a mobile base's
         ``[x, y, z, yaw]`` (z ignored) is its joints' target directly, the yaw unwrapped to
-        the turn nearest the current one (the hinge is continuous).
+        the turn nearest the current one (the hinge is continuous). ``arm_q``: the arm's
+        joint targets (n_arm,) [rad] given directly, for a robot commanded in joint space
+        (``smc sim --ros1`` with ``run.arm``): the servos take them and the controller
+        restarts from them.
         """
         if self.mobile_manipulator and cmd.base is None:  # the base holds its last target
             cmd = PoiCommand(cmd.t, cmd.target, cmd.gripper, base=self._last.base)
         self._last = cmd
         target = np.asarray(cmd.target, float)
-        if self.controller is not None:
+        if arm_q is not None and self.controller is not None:
+            self.controller.reset(arm_q)
+            self.data.ctrl[self._arm_act] = self.controller.q
+        elif self.controller is not None:
             self.data.ctrl[self._arm_act] = self.controller.update(target)
         if self.robot.gripper is not None:
             self.data.ctrl[self._grip_act] = self.robot.gripper.target(cmd.gripper)
