@@ -60,6 +60,24 @@ rospy.Subscriber(sys.argv[1], Image, pub.publish, queue_size=10, tcp_nodelay=Tru
 rospy.spin()
 """
 
+TF_RELAY = """
+import sys
+sys.path.append("/usr/lib/python3/dist-packages")
+import rospy
+from tf2_msgs.msg import TFMessage
+rospy.init_node("tf_relay", anonymous=True)
+pub = rospy.Publisher("/tf", TFMessage, queue_size=100)
+def relay(msg):
+    out = [t for t in msg.transforms if t.child_frame_id == sys.argv[1]]
+    for t in out:
+        t.child_frame_id = sys.argv[2]
+    if out:
+        pub.publish(TFMessage(out))
+rospy.Subscriber("/tf", TFMessage, relay, queue_size=100, tcp_nodelay=True)
+rospy.spin()
+"""
+"""Republishes one frame of /tf under another name: the transform's own publisher."""
+
 
 def _free_port() -> int:
     with socket.socket() as s:
@@ -306,6 +324,21 @@ def test_stops_without_the_poi_transform(ros_env, trees, tmp_path) -> None:
     node = _run(ros_env, trees["bench_pick"], topics, tmp_path / "run.json")
     out = _stopped(monitor, node, robot, "tf_lost")
     assert "tool0" in out
+
+
+def test_stops_when_the_transform_publisher_dies(ros_env, trees, tmp_path) -> None:
+    """The POI's transform comes from a publisher of its own, which dies mid-task: the
+    joints and the camera keep coming, the transform does not."""
+    relay = subprocess.Popen([sys.executable, "-c", TF_RELAY, "tool", "relayed_tool"], env=ros_env)
+    topics = _map(tmp_path / "map.yaml", "bench_pick", **{"topics.poi": {"frame": "relayed_tool"}})
+    robot = Robot(ros_env, tmp_path, "bench_pick", "--seed", "3")
+    monitor = Monitor(ros_env, tmp_path)
+    node = _run(ros_env, trees["bench_pick"], topics, tmp_path / "run.json")
+    monitor.wait_for(lambda r: r["topic"] == "/smc/poi_target")  # it moves the robot
+    relay.kill()
+    relay.wait()
+    out = _stopped(monitor, node, robot, "tf_lost")
+    assert "relayed_tool" in out
 
 
 @pytest.mark.parametrize(
