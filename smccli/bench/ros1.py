@@ -7,7 +7,7 @@ scene: the success rate over ROS (Wilson 95 %), how many trials made replay's de
 (same edges, goals within 1 mm, largest goal difference), and the latency from the receipt
 of a decision's image to the first command after it (p50, p95) beside replay's decision
 latency (perceive + match) on the same layouts. bench_pick ``--trials`` (20), rooms
-``--rooms-trials`` (5). Writes ``docs/bench_ros1.json`` (``--out``).
+``--rooms-trials`` (20). Writes ``docs/bench_ros1.json`` (``--out``).
 """
 
 from __future__ import annotations
@@ -205,7 +205,7 @@ def _percentiles(values: list[float]) -> dict[str, float | int | None]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=20)
-    ap.add_argument("--rooms-trials", type=int, default=5)
+    ap.add_argument("--rooms-trials", type=int, default=20)
     ap.add_argument("--seed", type=int, default=11)
     ap.add_argument("--work", type=Path, default=REPO / "bench_results")
     ap.add_argument("--out", type=Path, default=REPO / "docs" / "bench_ros1.json")
