@@ -154,8 +154,9 @@ def _frame_as_written(s: NoisySensors, frame: CameraFrame) -> CameraFrame:
     rgb = frame.rgb.astype(np.float32) / 255.0
     luma = rgb @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
     jump = np.zeros(depth.shape, dtype=bool)
-    dz_x = np.abs(np.diff(frame.depth, axis=1)) > c.edge_jump
-    dz_y = np.abs(np.diff(frame.depth, axis=0)) > c.edge_jump
+    with np.errstate(invalid="ignore"):  # inf - inf beside a hole: nan, not a jump
+        dz_x = np.abs(np.diff(frame.depth, axis=1)) > c.edge_jump
+        dz_y = np.abs(np.diff(frame.depth, axis=0)) > c.edge_jump
     jump[:, 1:] |= dz_x
     jump[:, :-1] |= dz_x
     jump[1:, :] |= dz_y
