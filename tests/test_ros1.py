@@ -8,14 +8,11 @@ Ctrl-C, with the reason published and printed and its exit code."""
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import time
-import xmlrpc.client
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -24,6 +21,7 @@ import pytest
 import yaml
 from conftest import sample_log_paths
 
+from smccli.ros.master import roscore
 from smccli.ros.node import EXIT_CODES
 
 pytestmark = pytest.mark.skipif(
@@ -79,50 +77,11 @@ rospy.spin()
 """Republishes one frame of /tf under another name: the transform's own publisher."""
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.fixture(scope="module")
 def ros_env(tmp_path_factory) -> Iterator[dict[str, str]]:
     """A roscore of its own on 127.0.0.1 and the environment that reaches it."""
-    home = tmp_path_factory.mktemp("ros")
-    port = _free_port()
-    env = {
-        **os.environ,
-        "ROS_MASTER_URI": f"http://127.0.0.1:{port}",
-        "ROS_IP": "127.0.0.1",
-        "ROS_HOSTNAME": "127.0.0.1",
-        "ROS_HOME": str(home),
-        "ROS_LOG_DIR": str(home / "log"),
-        "PYTHONPATH": str(Path(__file__).resolve().parent.parent),
-        "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"),
-    }
-    core = subprocess.Popen(
-        ["roscore", "-p", str(port)],
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-    )
-    master = xmlrpc.client.ServerProxy(env["ROS_MASTER_URI"])
-    deadline = time.monotonic() + 60
-    while True:
-        try:
-            master.getSystemState("/test")
-            break
-        except OSError:
-            assert core.poll() is None and time.monotonic() < deadline, "roscore did not start"
-            time.sleep(0.2)
-    yield env
-    core.send_signal(signal.SIGINT)
-    try:
-        core.wait(timeout=20)
-    except subprocess.TimeoutExpired:
-        os.killpg(core.pid, signal.SIGKILL)
-        core.wait()
+    with roscore(tmp_path_factory.mktemp("ros")) as env:
+        yield env
 
 
 @pytest.fixture(scope="module")
@@ -381,8 +340,9 @@ def test_without_rospy_one_line_names_the_packages(monkeypatch, tmp_path) -> Non
     from smccli.errors import SmcError
     from smccli.ros import ros1
 
-    if "rospy" in sys.modules:
-        pytest.skip("rospy is already imported in this process")
+    ros = ("rospy", "geometry_msgs", "sensor_msgs", "trajectory_msgs")
+    for name in [n for n in sys.modules if n.split(".")[0] in ros]:  # imported before: gone
+        monkeypatch.delitem(sys.modules, name)
     monkeypatch.setattr(ros1, "DIST_PACKAGES", str(tmp_path))
     monkeypatch.setattr(sys, "path", [p for p in sys.path if "dist-packages" not in p])
     with pytest.raises(SmcError, match="apt-get install ros-core python3-rospy"):

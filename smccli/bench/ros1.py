@@ -19,14 +19,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import argparse  # noqa: E402
 import json  # noqa: E402
 import signal  # noqa: E402
-import socket  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
-import xmlrpc.client  # noqa: E402
-from collections.abc import Iterator  # noqa: E402
-from contextlib import contextmanager  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
@@ -37,55 +33,13 @@ from smccli.bench.meta import machine, write_rows  # noqa: E402
 from smccli.bench.paper import demo_tree  # noqa: E402
 from smccli.execute.campaign import wilson  # noqa: E402
 from smccli.execute.episode import episode, layout_for, resolve  # noqa: E402
+from smccli.ros.master import roscore  # noqa: E402
 from smccli.ros.sim_robot import sim_topic_map  # noqa: E402
 from smccli.world.scene import ROBOT_KEY, Layout  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 GOAL_TOLERANCE = 1e-3
 """Goals within this of replay's count as the same decision [m, rad]."""
-
-
-@contextmanager
-def roscore(home: Path) -> Iterator[dict[str, str]]:
-    """A roscore on 127.0.0.1 at a free port; the environment that reaches it."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    env = {
-        **os.environ,
-        "ROS_MASTER_URI": f"http://127.0.0.1:{port}",
-        "ROS_IP": "127.0.0.1",
-        "ROS_HOSTNAME": "127.0.0.1",
-        "ROS_HOME": str(home),
-        "ROS_LOG_DIR": str(home / "log"),
-        "PYTHONPATH": str(REPO),
-    }
-    core = subprocess.Popen(
-        ["roscore", "-p", str(port)],
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-    )
-    master = xmlrpc.client.ServerProxy(env["ROS_MASTER_URI"])
-    deadline = time.monotonic() + 60
-    while True:
-        try:
-            master.getSystemState("/bench")
-            break
-        except OSError:
-            if core.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError("roscore did not start") from None
-            time.sleep(0.2)
-    try:
-        yield env
-    finally:
-        core.send_signal(signal.SIGINT)
-        try:
-            core.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            os.killpg(core.pid, signal.SIGKILL)
-            core.wait()
 
 
 def _smc(*args: str) -> list[str]:
