@@ -98,15 +98,17 @@ def serving(
     )
     try:
         seen, deadline = "", time.monotonic() + timeout
-        while not ("viewer: " in seen and "data: " in seen):
+        # both lines whole: a read may end inside one
+        while not (re.search(r"viewer: \S+\n", seen) and re.search(r"data: +\S+\n", seen)):
             if proc.poll() is not None:
                 raise RuntimeError(f"smc inspect --serve exited: {proc.communicate()[1]}")
             if time.monotonic() > deadline:
                 raise TimeoutError(f"no addresses printed within {timeout:.0f} s: {seen!r}")
             assert proc.stdout is not None
             ready, _, _ = select.select([proc.stdout], [], [], 1.0)
-            if ready:
-                seen += proc.stdout.readline()
+            if ready:  # the raw pipe: readline() would keep a second line in its buffer,
+                # which select does not see, and wait for output that already came
+                seen += os.read(proc.stdout.fileno(), 65536).decode()
         viewer = re.search(r"viewer: (\S+)", seen)
         data = re.search(r"data: +(\S+)", seen)
         assert viewer is not None and data is not None
