@@ -12,6 +12,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -408,7 +409,7 @@ def test_a_transform_that_stops_moving_stops_the_robot(tmp_path) -> None:
     from smccli.world.scene import load_scene
 
     scene = load_scene("bench_pick")
-    m = load_topic_map(_map(tmp_path / "map.yaml", "bench_pick"))
+    m = load_topic_map(_map(tmp_path / "map.yaml", "bench_pick", **{"run.wait_s": 0.3}))
     assert m.run is not None
     store = get_typestore(Stores.ROS1_NOETIC)  # as the node's decoder: TFMessage registered
     tf_text = "geometry_msgs/TransformStamped[] transforms"
@@ -444,10 +445,13 @@ def test_a_transform_that_stops_moving_stops_the_robot(tmp_path) -> None:
     Bus.inbox.add("/tf_static", tf(0, "camera"), 0.0)
     Bus.inbox.add("/tf", tf(10**9, "tool"), 0.0)
     readings(10**9)
-    with Bus.inbox.cond:
-        sensors._check()
+    sensors._check()
     assert sensors.poi()[:3].tolist() == [0.4, 0.0, 0.3]
     readings(2 * 10**9)  # a second later: the tool's transform did not come again
-    with pytest.raises(RobotStop) as stop, Bus.inbox.cond:
-        sensors._check()
+    with pytest.raises(RobotStop) as stop:
+        sensors._check()  # after wait_s: it was not merely in flight
     assert stop.value.stop == "tf_lost" and "'tool'" in stop.value.reason
+    late = threading.Timer(0.1, Bus.inbox.add, ("/tf", tf(2 * 10**9, "tool"), 0.0))
+    late.start()  # in flight: it comes within wait_s, and the robot goes on
+    sensors._check()
+    late.join()

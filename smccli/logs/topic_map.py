@@ -41,7 +41,8 @@ class RunSpec:
     gripper: str | None = None
     """trajectory_msgs/JointTrajectory topic of the gripper's fingers (None: not commanded)."""
     stale_s: float = 0.5
-    """A needed sensor whose newest stamp is older than this (robot clock) stops it [s]."""
+    """A needed sensor whose newest stamp is older than this (robot clock), and still so
+    after ``wait_s``, stops it [s]."""
     wait_s: float = 5.0
     """Longest wall-clock wait for the next joint state or a fresh image [s]."""
     period_s: float = 0.01

@@ -14,8 +14,9 @@ depth image within 20 ms of it, the latest camera info and the camera's pose at 
 image's stamp; a base's scan likewise.
 
 Safety: every period the node checks that what it needs is fresh (camera, lidar, the POI's
-and camera's transforms: newest stamp within ``stale_s`` of the robot's clock) and that the
-robot answered within ``wait_s`` of wall time; otherwise, or on Ctrl-C, it stops
+and camera's transforms: newest stamp within ``stale_s`` of the robot's clock, or so within
+``wait_s`` of wall time: it may be in flight) and that the robot answered within ``wait_s``
+of wall time; otherwise, or on Ctrl-C, it stops
 (:class:`RobotStop`): no further command, the robot holds its last target, the reason is
 published and returned with an exit code (:data:`EXIT_CODES`).
 """
@@ -214,8 +215,15 @@ class RobotSensors:
         """The robot's clock: its newest joint state's stamp [s]."""
         return self.now_ns / 1e9
 
-    def _wait(self, ready: Callable[[], bool], what: str, stop: str = "stale_sensors") -> None:
-        """Wait (wall clock, at most ``wait_s``) until ``ready()`` holds, with the lock."""
+    def _wait(
+        self,
+        ready: Callable[[], bool],
+        what: str,
+        stop: str = "stale_sensors",
+        timed_out: Callable[[], RobotStop] | None = None,
+    ) -> None:
+        """Wait (wall clock, at most ``wait_s``) until ``ready()`` holds, with the lock; on
+        timeout raise ``timed_out()`` or a ``stop`` saying ``what``."""
         deadline = time.monotonic() + self.spec.wait_s
         with self.inbox.cond:
             while not ready():
@@ -225,6 +233,8 @@ class RobotSensors:
                     raise RobotStop("stale_sensors", f"unreadable message: {self.inbox.errors[0]}")
                 left = deadline - time.monotonic()
                 if left <= 0:
+                    if timed_out is not None:
+                        raise timed_out()
                     raise RobotStop(stop, f"{what} (waited {self.spec.wait_s:g} s)")
                 self.inbox.cond.wait(min(left, SLICE_S))
 
@@ -248,8 +258,8 @@ class RobotSensors:
         self._wait(lambda: self.inbox.K is not None, f"no camera info on {topics['camera_info']}")
         if self.has_lidar:
             self._wait(lambda: bool(self.inbox.scans), f"no scan on {topics['lidar']}")
+        self._check()
         with self.inbox.cond:
-            self._check()
             if self._ik is not None:
                 position = self.inbox.joint_state().position
                 names = self.robot.joint_names
@@ -272,7 +282,22 @@ class RobotSensors:
         return f"topic {self.map.topics.get('poi')}"
 
     def _check(self) -> None:
-        """RobotStop unless what the tree needs is fresh on the robot's clock (lock held)."""
+        """RobotStop unless what the tree needs is fresh on the robot's clock.
+
+        The clock is the joint states; an image or a transform travels on a connection of
+        its own and may still be in flight when a later joint state is in (a simulator in
+        lockstep runs many periods per second of wall time), so a stale stream gets
+        ``wait_s`` of wall time to catch up before the robot is stopped."""
+        stale: list[RobotStop] = []
+
+        def fresh() -> bool:
+            stale[:] = [s for s in [self._staleness()] if s is not None]
+            return not stale
+
+        self._wait(fresh, "", timed_out=lambda: stale[0])
+
+    def _staleness(self) -> RobotStop | None:
+        """Why the camera, lidar or a needed transform is stale now, or None (lock held)."""
         now, limit = self.now_ns, self.spec.stale_s
         topics = self.map.topics
         for role in ("color", "depth", "lidar") if self.has_lidar else ("color", "depth"):
@@ -281,7 +306,7 @@ class RobotSensors:
             newest = self.inbox.newest(role)
             age = math.inf if newest is None else (now - newest) / 1e9
             if age > limit:
-                raise RobotStop(
+                return RobotStop(
                     "stale_sensors",
                     f"{role} on {topics[role]}: newest message {age:.2f} s old at "
                     f"t={now / 1e9:.2f} s (limit {limit:g} s)",
@@ -292,15 +317,16 @@ class RobotSensors:
         for frame in frames:
             reaches, newest = self.inbox.tf.freshness(frame)
             if not reaches:
-                raise RobotStop(
+                return RobotStop(
                     "tf_lost", f"no transform from {frame!r} to {self.map.world_frame!r}"
                 )
             if newest is not None and (now - newest) / 1e9 > limit:
-                raise RobotStop(
+                return RobotStop(
                     "tf_lost",
                     f"transform {frame!r} -> {self.map.world_frame!r}: newest "
                     f"{(now - newest) / 1e9:.2f} s old at t={now / 1e9:.2f} s (limit {limit:g} s)",
                 )
+        return None
 
     # --- commands -------------------------------------------------------------------------
 
@@ -329,8 +355,7 @@ class RobotSensors:
             f"no POI at t={self.now_ns / 1e9:.2f} s ({self._poi_source()})",
             stop="tf_lost",
         )
-        with self.inbox.cond:
-            self._check()
+        self._check()
 
     def decided(self) -> None:
         """A decision was made from the last image read: its latency runs to the next
