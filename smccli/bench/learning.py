@@ -8,7 +8,8 @@ clumsy in its own way. Here :data:`DEMOS` human-like demonstrations of bench_pic
 through a detour of its own, a grasp off the box's centre and off its axis) are recorded
 from their own random layouts through the realistic sensors, in a scene with achromatic
 look-alikes of the white box (``scenes/bench_pick_lookalike``). The trees of the first 1,
-2, 4 and 8 of them run one campaign each on the same seed (the same layouts). Writes
+2, 4 and 8 of them run one campaign each on the same seed (the same layouts); the seed
+also draws the operators (``--seed S``: operators S to S + 7). Writes
 ``docs/bench_learning.json`` and ``docs/img/bench_learning.png`` (success with Wilson 95 %
 intervals), and first the margin the look-alikes leave: D_P of the white box against
 itself and against each of them over random layouts (:func:`lookalike_separability`).
@@ -26,6 +27,7 @@ import numpy as np
 
 from smccli.bench.meta import campaign_line, campaign_row, machine, write_rows
 from smccli.bench.paper import VARIANT_DIR, campaign, strip_trials
+from smccli.bench.seeds import results_dir, seed_option
 
 REPO = Path(__file__).resolve().parents[2]
 SCENE = VARIANT_DIR / "bench_pick_lookalike" / "scene.yaml"
@@ -69,15 +71,15 @@ steps:
 """
 
 
-def record_demos(work: Path, n: int) -> list[Path]:
-    """The ``n`` clumsy demonstrations, operator ``k`` from random layout ``k``; a
-    demonstration that fails its task (the recorder's verdict) is recorded again with the
-    next seed, as a person would redo it."""
+def record_demos(work: Path, n: int, first: int = 0) -> list[Path]:
+    """The ``n`` clumsy demonstrations of operators ``first`` ... ``first + n - 1``, operator
+    ``k`` from random layout ``k``; a demonstration that fails its task (the recorder's
+    verdict) is recorded again with the layout 1000 further on, as a person would redo it."""
     from smccli.logs import read_log
     from smccli.record.session import RecordConfig, record
 
     logs = []
-    for k in range(n):
+    for k in range(first, first + n):
         script = work / f"clumsy_{k}.yaml"
         script.write_text(clumsy_script(k))
         for attempt in range(5):
@@ -171,11 +173,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--demos", type=int, nargs="+", default=[1, 2, 4, 8])
     ap.add_argument("--trials", type=int, default=300)
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_option("learning"), default=0, help="or held-out")
     ap.add_argument("--separability-layouts", type=int, default=30)
-    ap.add_argument("--out", type=Path, default=REPO / "docs" / "bench_learning.json")
-    ap.add_argument("--fig", type=Path, default=REPO / "docs" / "img" / "bench_learning.png")
+    ap.add_argument("--out", type=Path, help="docs/bench_learning.json, or docs/held_out/...")
+    ap.add_argument("--fig", type=Path, help="docs/img/bench_learning.png, or docs/held_out/...")
     args = ap.parse_args(argv)
+    args.out = args.out or results_dir(args.seed) / "bench_learning.json"
+    args.fig = args.fig or results_dir(args.seed) / "img" / "bench_learning.png"
     from smccli.learn.compile import compile_logs
 
     meta = machine()
@@ -188,7 +192,7 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
-        logs = record_demos(work, max(args.demos))
+        logs = record_demos(work, max(args.demos), first=args.seed)
         for n in args.demos:
             tree = work / f"tree_{n}.json"
             compile_logs(logs[:n], tree, rebuild=True)
@@ -204,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
                     failed_trials=strip_trials(s)["failed_trials"],
                 )
             )
-        scripts = [clumsy_script(k) for k in range(max(args.demos))]
+        scripts = [clumsy_script(args.seed + k) for k in range(max(args.demos))]
         redone = [p.name for p in logs if not p.stem.endswith("_0")]
     write_rows(
         args.out,

@@ -29,6 +29,7 @@ import numpy as np  # noqa: E402
 
 from smccli.bench.meta import machine, write_rows  # noqa: E402
 from smccli.bench.paper import VARIANT_DIR, demo_tree, noisy_demo_tree  # noqa: E402
+from smccli.bench.seeds import results_dir, seed_option  # noqa: E402
 from smccli.execute.campaign import wilson  # noqa: E402
 from smccli.execute.episode import episode, layout_for, resolve  # noqa: E402
 from smccli.execute.executor import LOOK_PERIOD  # noqa: E402
@@ -79,10 +80,11 @@ def pushed_campaign(
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=100)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_option("look"), default=0, help="or held-out")
     ap.add_argument("--work", type=Path, default=REPO / "bench_results")
-    ap.add_argument("--out", type=Path, default=REPO / "docs" / "bench_look.json")
+    ap.add_argument("--out", type=Path, help="docs/bench_look.json, or docs/held_out/...")
     args = ap.parse_args(argv)
+    args.out = args.out or results_dir(args.seed) / "bench_look.json"
     meta = machine()
     trees = {
         "ideal": (demo_tree("bench_pick", args.work), None),

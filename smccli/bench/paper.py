@@ -39,6 +39,7 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 
 from smccli.bench.meta import campaign_line, machine  # noqa: E402
+from smccli.bench.seeds import results_dir, seed_option  # noqa: E402
 from smccli.execute import campaign as cp  # noqa: E402
 from smccli.execute.episode import layout_for, resolve  # noqa: E402
 from smccli.execute.executor import EdgeStack, TreeExecutor, match_edges  # noqa: E402
@@ -338,13 +339,15 @@ def _parser() -> argparse.ArgumentParser:
         default=1288,
         help="trials in each of realistic, clutter and moving (0: skip)",
     )
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_option("paper"), default=0, help="or held-out")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument(
         "--work", type=Path, default=REPO / "bench_results", help="logs and trees (git-ignored)"
     )
     ap.add_argument(
-        "--out", type=Path, default=REPO / "docs", help="bench_results.json and img/*.png go here"
+        "--out",
+        type=Path,
+        help="bench_results.json and img/*.png go here (docs/, or docs/held_out/)",
     )
     return ap
 
@@ -453,6 +456,7 @@ def _print_results(
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    args.out = args.out or results_dir(args.seed)
     results_file = args.out / "bench_results.json"
     check_output(results_file, force=True)  # before an hour of trials
     results: dict[str, Any] = {

@@ -29,6 +29,7 @@ import numpy as np  # noqa: E402
 
 from smccli.bench.meta import campaign_line, machine  # noqa: E402
 from smccli.bench.paper import REPO, campaign, demo_tree, strip_trials  # noqa: E402
+from smccli.bench.seeds import results_dir, seed_option  # noqa: E402
 from smccli.execute.episode import episode, layout_for, resolve  # noqa: E402
 from smccli.learn.tree import ROOT  # noqa: E402
 from smccli.outputs import check_output, write_atomic  # noqa: E402
@@ -113,11 +114,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--drift-trials", type=int, default=200, help="0: skip")
     ap.add_argument("--drift", type=float, default=0.02)
     ap.add_argument("--latency-episodes", type=int, default=30)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_option("rooms"), default=0, help="or held-out")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--work", type=Path, default=REPO / "bench_results")
-    ap.add_argument("--out", type=Path, default=REPO / "docs")
+    ap.add_argument("--out", type=Path, help="docs/, or docs/held_out/")
     args = ap.parse_args(argv)
+    args.out = args.out or results_dir(args.seed)
     check_output(args.out / "bench_rooms.json", force=True)
 
     tree_path = demo_tree("rooms", args.work)

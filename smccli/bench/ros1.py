@@ -31,6 +31,7 @@ import yaml  # noqa: E402
 
 from smccli.bench.meta import machine, write_rows  # noqa: E402
 from smccli.bench.paper import demo_tree  # noqa: E402
+from smccli.bench.seeds import results_dir, seed_option  # noqa: E402
 from smccli.execute.campaign import wilson  # noqa: E402
 from smccli.execute.episode import episode, layout_for, resolve  # noqa: E402
 from smccli.ros.master import roscore  # noqa: E402
@@ -160,10 +161,11 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=20)
     ap.add_argument("--rooms-trials", type=int, default=20)
-    ap.add_argument("--seed", type=int, default=11)
+    ap.add_argument("--seed", type=seed_option("ros1"), default=11, help="or held-out")
     ap.add_argument("--work", type=Path, default=REPO / "bench_results")
-    ap.add_argument("--out", type=Path, default=REPO / "docs" / "bench_ros1.json")
+    ap.add_argument("--out", type=Path, help="docs/bench_ros1.json, or docs/held_out/...")
     args = ap.parse_args(argv)
+    args.out = args.out or results_dir(args.seed) / "bench_ros1.json"
     meta = machine()
     rows = []
     args.work.mkdir(parents=True, exist_ok=True)
