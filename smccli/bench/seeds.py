@@ -59,9 +59,12 @@ def is_held_out(seed: int) -> bool:
 
 def results_dir(seed: int) -> Path:
     """Where a benchmark run on ``seed`` writes by default: ``docs/``, or ``docs/held_out/``
-    for a held-out seed (the development figures stay beside them)."""
+    (made if missing) for a held-out seed; the development figures stay beside them."""
     docs = Path(__file__).resolve().parents[2] / "docs"
-    return docs / "held_out" if is_held_out(seed) else docs
+    if not is_held_out(seed):
+        return docs
+    (docs / "held_out" / "img").mkdir(parents=True, exist_ok=True)
+    return docs / "held_out"
 
 
 def main(argv: list[str] | None = None) -> int:
