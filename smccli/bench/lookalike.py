@@ -23,11 +23,11 @@ and size written in and its range zero), through :func:`~smccli.execute.episode.
 judged by the episode's own result. For evaluation only (the simulator's truth, never
 control's), the first camera frame as the robot sees it (realistic noise) and MuJoCo's
 segmentation give each object's mean colour (its darker half: the sides) over the table's
-around it, channel by channel (:func:`appearance`): gain and white balance cancel. A look-alike is *indistinguishable*
-when every channel lies as close to the white box's as a second white box's lies in 95 %
-of :data:`CALIBRATION_LAYOUTS` frames (:func:`calibrate`: the family's draws painted
-white): in this lamp light a white box clips the sensor, and a light grey nearly does.
-Those trials are reported apart and left out of the goal. Writes
+around it, channel by channel (:func:`appearance`): gain and white balance cancel. A
+look-alike is *indistinguishable* when every channel lies as close to the white box's as
+a second white box's lies in 95 % of :data:`CALIBRATION_LAYOUTS` frames (:func:`calibrate`:
+the family's draws painted white): in this lamp light a white box clips the sensor, and a
+light grey nearly does. Those trials are reported apart and left out of the goal. Writes
 ``docs/bench_lookalike.json`` (or ``docs/held_out/``): per-trial rows and success by grey
 band and by gap band with Wilson 95 % intervals.
 """
