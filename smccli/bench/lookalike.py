@@ -352,8 +352,9 @@ def calibrate(n: int = CALIBRATION_LAYOUTS) -> dict[str, Any]:
             seen = appearance(sim, [TARGET, LOOKALIKE])
         finally:
             sim.close()
-        if seen[TARGET] is not None and seen[LOOKALIKE] is not None:
-            diffs.append(np.subtract(seen[LOOKALIKE], seen[TARGET]))
+        white_seen, twin_seen = seen[TARGET], seen[LOOKALIKE]
+        if white_seen is not None and twin_seen is not None:
+            diffs.append(np.subtract(twin_seen, white_seen))
     a = np.abs(np.array(diffs))
     return {
         "twins": n,
