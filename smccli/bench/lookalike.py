@@ -64,11 +64,16 @@ REPLACED = "grey_bar"
 """The learning scene's fixed look-alike, which the drawn one replaces."""
 LOOKALIKE = "lookalike"
 GREY = (0.35, 0.70)
+"""An achromatic look-alike's grey level, drawn uniformly (the white box: 0.95)."""
 NEAR_COLOURS = ((0.93, 0.88, 0.75), (0.90, 0.90, 0.85))
+"""The ends of the near-colours (a cream, an off-white): drawn on the line between."""
 NEAR_COLOUR_SHARE = 0.2
 SIZE_FACTOR = (0.8, 1.2)
+"""The factor of the white box's size, drawn per axis."""
 TOUCH_SHARE = 0.15
+"""Share of the trials whose look-alike touches the white box."""
 NEAR_SHARE = 0.35
+"""Share of the trials whose look-alike stands 0 to :data:`NEAR_GAP` from it."""
 NEAR_GAP = 0.03
 """Largest edge-to-edge gap of a *near* placement [m]."""
 AREA = ((0.25, 0.75), (-0.45, 0.45))
@@ -78,6 +83,7 @@ DRAW_STREAM = 38
 RING_PX = (3, 12)
 """The table ring around an object in :func:`appearance`: from 3 to 12 pixels out."""
 CALIBRATION_SEED = 1
+"""A development seed: the twins of :func:`calibrate` are the family's draws of ``[1, k]``."""
 CALIBRATION_LAYOUTS = 40
 GREY_BANDS = ((0.35, 0.45), (0.45, 0.55), (0.55, 0.65), (0.65, 0.70))
 GAP_BANDS = (
