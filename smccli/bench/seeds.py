@@ -24,7 +24,7 @@ DEV_SEEDS = range(0, 100_000)
 """Seeds for tests and debugging: every seed below 100,000."""
 HELD_OUT_VERSION = 1
 """Raise it when a held-out figure was debugged on: every held-out seed changes."""
-BENCHMARKS = ("paper", "rooms", "look", "learning", "loco_manip", "ros1")
+BENCHMARKS = ("paper", "rooms", "look", "learning", "lookalike", "loco_manip", "ros1")
 """The benchmarks with a held-out seed: the ``smccli.bench`` modules' names, and
 ``loco_manip`` (the mobile manipulator's campaign, run with ``smc replay``)."""
 
