@@ -23,7 +23,7 @@ from smccli.learn.contingency import StoredStack, goal_gap, match_stack
 from smccli.learn.contingency import d_p as d_p_stored
 from smccli.learn.params import SmcParams
 from smccli.learn.tree import Edge
-from smccli.perception import Cluster, cluster_unions, clusters_from_frame
+from smccli.perception import Cluster, cluster_splits, cluster_unions, clusters_from_frame
 from smccli.perception.room import d_room, room_histogram
 from smccli.perception.scan import align_scans, chamfer
 
@@ -105,20 +105,25 @@ def match_arm(
     d, idx = match_edges(stack, clusters, obs.weight, params)
     ok = d < params.t_hp
     n_seen, union_s = len(clusters), 0.0
-    if not ok.any() and obs.camera is not None and n_seen >= 2 and stack.has_cluster.any():
+    if obs.camera is not None and stack.has_cluster.any():
         # Nothing contingent: the object may be in pieces (an open box's near wall and
-        # its floor, apart across a band of depth holes). Its taught perception says
-        # whether two neighbouring clusters together are it; only here, so a decision
-        # a whole object makes is never changed.
-        t1 = time.perf_counter()
-        unions = cluster_unions(obs.camera, obs.robot_geometry, params.perception, obs.base)
-        union_s = time.perf_counter() - t1
-        if unions:
-            d2, idx2 = match_edges(stack, unions, obs.weight, params)
-            better = d2 < d
-            d, idx = np.where(better, d2, d), np.where(better, idx2 + n_seen, idx)
-            clusters = clusters + unions
-            ok = d < params.t_hp
+        # its floor, apart across a band of depth holes), or two objects touching may be
+        # one cluster (a white box with a grey box against it). Its taught perception says
+        # whether two neighbouring clusters together, or a piece of one divided by colour
+        # or height, are it; only here, so a decision a whole object makes is never
+        # changed. Pieces count only where they make an SMC contingent.
+        for more, least, contingent_only in ((cluster_unions, 2, False), (cluster_splits, 1, True)):
+            if ok.any() or n_seen < least:
+                continue
+            t1 = time.perf_counter()
+            extra = more(obs.camera, obs.robot_geometry, params.perception, obs.base)
+            union_s += time.perf_counter() - t1
+            if extra:
+                d2, idx2 = match_edges(stack, extra, obs.weight, params)
+                better = (d2 < d) & ((d2 < params.t_hp) | (not contingent_only))
+                d, idx = np.where(better, d2, d), np.where(better, idx2 + len(clusters), idx)
+                clusters = clusters + extra
+                ok = d < params.t_hp
     chosen = int(np.argmin(np.where(ok, d, np.inf))) if ok.any() else None
     match_s = time.perf_counter() - t0 - union_s
     cands = tuple(

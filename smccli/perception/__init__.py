@@ -3,7 +3,8 @@
 Pipeline (:func:`clusters_from_frame`): depth -> world points -> workspace crop ->
 self-filter -> table plane removal (RANSAC) -> DBSCAN -> parts joined -> per cluster a
 colour histogram, an upright oriented box (centroid, yaw, extents); :func:`cluster_unions`
-describes neighbouring clusters as one (an object seen in pieces). :func:`d_cluster`
+describes neighbouring clusters as one (an object seen in pieces), :func:`cluster_splits`
+one cluster's pieces as objects (objects touching). :func:`d_cluster`
 compares two clusters (1 = clearly different, T_hP = 0.1 separates same from different);
 :func:`salient_cluster` picks the cluster at the POI (eq. 20-22).
 
@@ -36,6 +37,7 @@ from smccli.perception.scan import (
     scan_from_dict,
     scan_to_dict,
 )
+from smccli.perception.splits import cluster_splits
 
 # open3d's parallel loops (ICP's normal equations, RANSAC, DBSCAN) reduce in thread order:
 # their last bits vary from run to run, enough to flip a decision near a threshold. One
@@ -53,6 +55,7 @@ __all__ = [
     "align_scans",
     "cloud_from_frame",
     "cluster_from_dict",
+    "cluster_splits",
     "cluster_to_dict",
     "cluster_unions",
     "clusters_from_frame",
