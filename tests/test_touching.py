@@ -1,0 +1,87 @@
+"""Objects touching one another (issue 38): the white box with a grey box of its size
+against it is one cluster to DBSCAN, and its pieces divided by colour or height
+(:func:`~smccli.perception.cluster_splits`) hold the white box again. Real renders of the
+look-alike family's trials (development seed 0); ground truth only in assertions."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from smccli.bench import lookalike as la  # noqa: E402
+from smccli.perception import cluster_splits, clusters_from_frame, d_cluster  # noqa: E402
+from smccli.perception.params import scene_perception  # noqa: E402
+from smccli.world.sim import Sim  # noqa: E402
+
+T_HP = 0.1
+TOUCHING = (35, 56, 90)
+"""Trials of seed 0 whose grey look-alike (0.37, 0.58, 0.40) touches the white box (gap
+under 20 µm) and that stopped at the first decision with ``no_contingent_smc`` before
+splits (docs/bench_lookalike.json at c0757ca)."""
+
+
+def _frame(scene, layout):
+    sim = Sim(scene, layout)
+    try:
+        return sim.render_camera(), sim.robot_geometry()
+    finally:
+        sim.close()
+
+
+@pytest.fixture(scope="module")
+def whole():
+    """The white box's view alone: trial 35's layout with the look-alike out of the way."""
+    draw = la.draw_trial(la.learning_scene(), 0, TOUCHING[0])
+    scene = la.learning_scene()
+    layout = {**draw.layout, la.REPLACED: [0.7, 0.4, 0.025, 0.0]}
+    frame, robot = _frame(scene, layout)
+    params = scene_perception(scene)
+    white = np.asarray(layout[la.TARGET])
+    c = min(clusters_from_frame(frame, robot, params), key=lambda k: _off(k, white))
+    assert _off(c, white) < 0.01
+    return c, params
+
+
+def _off(cluster, pose) -> float:
+    return float(np.hypot(*(cluster.centroid[:2] - np.asarray(pose)[:2])))
+
+
+def test_a_piece_of_the_merged_cluster_is_the_white_box(whole, tmp_path):
+    view, params = whole
+    for i in TOUCHING:
+        draw = la.draw_trial(la.learning_scene(), 0, i)
+        assert draw.gap < 0.001
+        folder = tmp_path / str(i)
+        folder.mkdir()
+        scene = la.trial_scene(draw, folder)
+        layout = {**draw.layout, la.LOOKALIKE: draw.pose}
+        frame, robot = _frame(scene, layout)
+        seen = clusters_from_frame(frame, robot, params)
+        assert min(d_cluster(c, view, params) for c in seen) >= T_HP, f"trial {i}: not merged"
+        pieces = cluster_splits(frame, robot, params)
+        d, best = min(((d_cluster(c, view, params), c) for c in pieces), key=lambda t: t[0])
+        assert d < T_HP, f"trial {i}: best piece D_P {d:.3f}"
+        assert _off(best, layout[la.TARGET]) < 0.01, f"trial {i}: {best.centroid}"
+        # No piece of the grey look-alike passes for the white box.
+        for c in pieces:
+            if _off(c, draw.pose) < 0.02 and _off(c, layout[la.TARGET]) > 0.04:
+                assert d_cluster(c, view, params) >= T_HP, f"trial {i}: {c.centroid}"
+
+
+def test_touching_trials_that_stopped_now_succeed(tmp_path) -> None:
+    """One clumsy demonstration recorded and compiled; two touching trials that stopped
+    with ``no_contingent_smc`` run end to end and put the white box in the orange box."""
+    from smccli.bench.learning import record_demos
+    from smccli.learn.compile import compile_logs
+
+    logs = record_demos(tmp_path, 1, first=0)
+    tree = tmp_path / "tree.json"
+    compile_logs(logs, tree, rebuild=True)
+    rows = la.run_trials(Path(tree), 0, TOUCHING[1:], 1, [0.25, 0.35, 0.41])
+    for row in rows:
+        assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"
