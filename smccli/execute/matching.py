@@ -109,7 +109,7 @@ def match_arm(
         # Nothing contingent: the object may be in pieces (an open box's near wall and
         # its floor, apart across a band of depth holes), or two objects touching may be
         # one cluster (a white box with a grey box against it). Its taught perception says
-        # whether two neighbouring clusters together, or a piece of one divided by colour
+        # whether two neighbouring clusters together, or a piece of one divided by brightness
         # or height, are it; only here, so a decision a whole object makes is never
         # changed. Pieces count only where they make an SMC contingent.
         for more, least, contingent_only in ((cluster_unions, 2, False), (cluster_splits, 1, True)):

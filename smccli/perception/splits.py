@@ -3,7 +3,7 @@
 Two objects standing closer than DBSCAN's reach (``dbscan_eps``) are one cluster: a white
 box with a grey box of its size against it reads as one 25 x 14 cm object, which matches
 no taught view. No geometry of the merged points says where one ends, but the objects
-differ in colour or in height, even within one frame of a camera whose exposure and white
+differ in brightness or in height, even within one frame of a camera whose exposure and white
 balance drift: :func:`cluster_splits` divides each cluster by each of these
 (:func:`split_masks`), keeps each side's connected pieces, and describes each piece as an
 object of its own (:func:`~smccli.perception.clusters.describe_points`). The SMC's taught
@@ -32,10 +32,10 @@ so two objects of different heights fall apart by it."""
 MIN_STEP = 0.003
 """Smallest difference of the two sides' mean local top for a height split [m]: the
 depth camera's noise on a flat top is about 1 mm."""
-MIN_COLOUR_STEP = 20
-"""Smallest difference of the two sides' mean brightness or chroma for a colour split
-(0-255): one object's top and sides differ by more, which is why every piece only ever
-is a candidate for the taught perception to judge."""
+MIN_BRIGHTNESS_STEP = 20
+"""Smallest difference of the two sides' mean brightness for a brightness split (0-255):
+one object's top and sides differ by more, which is why every piece only ever is a
+candidate for the taught perception to judge."""
 
 
 def otsu_split(values: np.ndarray, min_step: float) -> np.ndarray | None:
@@ -56,14 +56,11 @@ def split_masks(
     points: np.ndarray, colors: np.ndarray, plane: np.ndarray | None
 ) -> list[np.ndarray]:
     """Ways to divide one cluster's points (n, 3) [m] with colours (n, 3) uint8 in two,
-    masks (n,): by brightness (max(R, G, B)), by chroma (max - min: a cream against a
-    white) and by each point's local top above ``plane`` (:data:`TOP_RADIUS`: one object
-    taller than the other)."""
-    c = colors.astype(np.float64)
-    masks = [
-        otsu_split(c.max(axis=1), MIN_COLOUR_STEP),
-        otsu_split(c.max(axis=1) - c.min(axis=1), MIN_COLOUR_STEP),
-    ]
+    masks (n,): by brightness (max(R, G, B): a white box's clipped top against a grey
+    one's) and by each point's local top above ``plane`` (:data:`TOP_RADIUS`: one object
+    taller than the other). Chroma (max - min) divided none of the 46 merged white box
+    and look-alike clusters of seed 0 usefully (docs/perception.md) and is left out."""
+    masks = [otsu_split(colors.max(axis=1).astype(np.float64), MIN_BRIGHTNESS_STEP)]
     if plane is not None:
         h = heights_above(points, plane)
         near = cKDTree(points[:, :2]).query_ball_point(points[:, :2], TOP_RADIUS)
