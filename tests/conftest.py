@@ -82,6 +82,18 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(0)
 
 
+def first_view(scene, layout):
+    """The camera frame and the robot's geometry of a fresh Sim of ``scene`` on ``layout``
+    (what the robot sees before it moves)."""
+    from smccli.world.sim import Sim
+
+    sim = Sim(scene, layout)
+    try:
+        return sim.render_camera(), sim.robot_geometry()
+    finally:
+        sim.close()
+
+
 def sample_log_paths(scene: str) -> list[Path]:
     """The committed sample demonstrations of a scene (made by ``make sample-logs``)."""
     paths = sorted((SAMPLE_LOGS / scene).glob("*.mcap"))

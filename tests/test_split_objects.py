@@ -13,6 +13,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from conftest import first_view  # noqa: E402
 
 from smccli.execute.episode import episode, layout_for, resolve  # noqa: E402
 from smccli.perception import cluster_unions, clusters_from_frame, d_cluster  # noqa: E402
@@ -33,20 +34,12 @@ SPLIT_APART = (125, 149)
 perception tells they are one object."""
 
 
-def _frame(scene, layout):
-    sim = Sim(scene, layout)
-    try:
-        return sim.render_camera(), sim.robot_geometry()
-    finally:
-        sim.close()
-
-
 @pytest.fixture(scope="module")
 def moving():
     scene = load_scene(MOVING)
     params = scene_perception(scene)
     # A whole view of the box, from its default pose (one piece there).
-    frame, robot = _frame(scene, {o.name: list(o.pose) for o in scene.objects})
+    frame, robot = first_view(scene, {o.name: list(o.pose) for o in scene.objects})
     whole = max(clusters_from_frame(frame, robot, params), key=lambda c: c.n_points)
     np.testing.assert_allclose(whole.extents[:2], [0.26, 0.16], atol=0.006)
     return scene, params, whole
@@ -61,7 +54,7 @@ def test_an_open_box_cut_in_pieces_by_depth_holes_is_seen_whole(moving):
     unjoined = dataclasses.replace(params, join_overlap=9.0)  # never joins
     for i in SPLIT_BY_JOINABLE_PARTS + SPLIT_APART:
         layout = layout_for(scene, 0, i)
-        frame, robot = _frame(scene, layout)
+        frame, robot = first_view(scene, layout)
         d_apart, _ = _best(clusters_from_frame(frame, robot, unjoined), whole, params)
         assert d_apart >= T_HP, f"layout {i}: the box is not in pieces here ({d_apart:.3f})"
         d, c = _best(clusters_from_frame(frame, robot, params), whole, params)
@@ -87,7 +80,7 @@ def test_objects_side_by_side_stay_two(moving):
             layout["white_box"] = [0.45, -0.05, base["white_box"][2], yaw]
             d = 0.04 + gap
             layout["grey_bar"] = [0.45 - s * d, -0.05 + c * d, base["grey_bar"][2], yaw]
-            frame, robot = _frame(scene, layout)
+            frame, robot = first_view(scene, layout)
             near = [
                 k
                 for k in clusters_from_frame(frame, robot, params)

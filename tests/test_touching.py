@@ -12,11 +12,11 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from conftest import first_view  # noqa: E402
 
 from smccli.bench import lookalike as la  # noqa: E402
 from smccli.perception import cluster_splits, clusters_from_frame, d_cluster  # noqa: E402
 from smccli.perception.params import scene_perception  # noqa: E402
-from smccli.world.sim import Sim  # noqa: E402
 
 T_HP = 0.1
 TOUCHING = (35, 56, 90)
@@ -25,21 +25,13 @@ under 20 µm) and that stopped at the first decision with ``no_contingent_smc`` 
 splits (docs/bench_lookalike.json at c0757ca)."""
 
 
-def _frame(scene, layout):
-    sim = Sim(scene, layout)
-    try:
-        return sim.render_camera(), sim.robot_geometry()
-    finally:
-        sim.close()
-
-
 @pytest.fixture(scope="module")
 def whole():
     """The white box's view alone: trial 35's layout with the look-alike out of the way."""
     draw = la.draw_trial(la.learning_scene(), 0, TOUCHING[0])
     scene = la.learning_scene()
     layout = {**draw.layout, la.REPLACED: [0.7, 0.4, 0.025, 0.0]}
-    frame, robot = _frame(scene, layout)
+    frame, robot = first_view(scene, layout)
     params = scene_perception(scene)
     white = np.asarray(layout[la.TARGET])
     c = min(clusters_from_frame(frame, robot, params), key=lambda k: _off(k, white))
@@ -60,7 +52,7 @@ def test_a_piece_of_the_merged_cluster_is_the_white_box(whole, tmp_path):
         folder.mkdir()
         scene = la.trial_scene(draw, folder)
         layout = {**draw.layout, la.LOOKALIKE: draw.pose}
-        frame, robot = _frame(scene, layout)
+        frame, robot = first_view(scene, layout)
         seen = clusters_from_frame(frame, robot, params)
         assert min(d_cluster(c, view, params) for c in seen) >= T_HP, f"trial {i}: not merged"
         pieces = cluster_splits(frame, robot, params)
