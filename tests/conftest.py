@@ -19,6 +19,9 @@ from zygote import Zygote
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 REPO = Path(__file__).resolve().parent.parent
+# The commands' disk cache (simplified meshes, smccli/world/render_mesh.py): the clone's,
+# not the user's home.
+os.environ.setdefault("SMC_CACHE_DIR", str(REPO / ".cache" / "smc"))
 SAMPLE_LOGS = REPO / "sample_logs"
 SCENES = ("pick_place", "weigh_sort", "bench_pick")
 

@@ -78,14 +78,30 @@ def test_the_sensor_sees_the_same_picture_but_along_the_silhouette(soarm) -> Non
     assert np.mean(np.abs(depth - depth_s) > 0.002) < 0.005
 
 
-def test_simplifying_is_repeatable(soarm) -> None:
-    """A campaign's trials must see the same robot: the same surface from a cold cache."""
+def test_simplifying_is_repeatable(soarm, tmp_path, monkeypatch) -> None:
+    """A campaign's trials must see the same robot: the same surface from a cold cache,
+    from the disk cache another command left, and from a cache file that went bad."""
     model, _ = soarm
-    first = render_model(model)
-    render_mesh._SIMPLIFIED.clear()
-    again = render_model(model)
-    assert np.array_equal(first.mesh_vert, again.mesh_vert)
-    assert np.array_equal(first.mesh_face, again.mesh_face)
+
+    def drawn(cache: str):
+        monkeypatch.setenv("SMC_CACHE_DIR", str(tmp_path / cache))
+        render_mesh._SIMPLIFIED.clear()
+        return render_model(model)
+
+    def same(a, b) -> bool:
+        return np.array_equal(a.mesh_vert, b.mesh_vert) and np.array_equal(
+            a.mesh_face, b.mesh_face
+        )
+
+    first = drawn("a")
+    files = sorted((tmp_path / "a" / "meshes").glob("*.npz"))
+    assert files  # each simplified mesh kept on disk
+    assert same(first, drawn("b"))  # cold again, elsewhere
+    assert same(first, drawn("a"))  # read back from disk
+    files[0].write_bytes(b"not a zip")
+    assert same(first, drawn("a"))  # a bad file is simplified again ...
+    with np.load(files[0]) as f:  # ... and replaced
+        assert len(f["vertices"]) > 0
 
 
 def test_a_model_of_small_meshes_is_drawn_as_it_is() -> None:

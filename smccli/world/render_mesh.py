@@ -16,17 +16,59 @@ from __future__ import annotations
 
 import copy
 import hashlib
+import io
+import os
+import zipfile
+from pathlib import Path
 
 import mujoco
 import numpy as np
 import open3d as o3d
 
+from smccli.outputs import write_atomic
+
 RENDER_FACES = 3000
 """Triangles per mesh the sensor camera draws at most (quadric decimation above it)."""
 
-# Simplifying a 50k-triangle mesh takes about 0.2 s: a campaign's trials rebuild their
-# simulation, so one process simplifies each mesh once.
+# Simplifying a 50k-triangle mesh takes about 0.2 s (the SO-ARM's twelve: 1.4 s), which
+# every command that renders would pay again: one process simplifies each mesh once, and
+# keeps the result on disk for the next (:func:`cache_dir`).
 _SIMPLIFIED: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+
+def cache_dir() -> Path:
+    """Where simplified meshes are kept between commands: ``$SMC_CACHE_DIR/meshes``, else
+    ``$XDG_CACHE_HOME/smc/meshes`` (``~/.cache/smc/meshes``). A file there is named by
+    the hash of the mesh it simplifies, the face budget and open3d's version; deleting
+    the folder only costs the time to simplify again."""
+    root = os.environ.get("SMC_CACHE_DIR")
+    if not root:
+        xdg = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+        root = str(Path(xdg) / "smc")
+    return Path(root) / "meshes"
+
+
+def _load(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """A cached simplification, or None when there is none or it cannot be read (it is
+    then simplified again and the file replaced)."""
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            return f["vertices"], f["triangles"], f["normals"]
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+        return None
+
+
+def _store(path: Path, surface: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+    """Keep a simplification on disk (atomically); a folder that cannot be written only
+    means no cache."""
+    buffer = io.BytesIO()
+    vertices, triangles, normals = surface
+    np.savez(buffer, vertices=vertices, triangles=triangles, normals=normals)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(path, buffer.getvalue())
+    except OSError:
+        pass
 
 
 def render_model(model: mujoco.MjModel, faces: int = RENDER_FACES) -> mujoco.MjModel:
@@ -59,8 +101,13 @@ def _simplified(
     fa, fn = model.mesh_faceadr[i], model.mesh_facenum[i]
     vertices = model.mesh_vert[va : va + vn]
     triangles = model.mesh_face[fa : fa + fn]
-    key = hashlib.sha1(vertices.tobytes() + triangles.tobytes() + str(faces).encode()).hexdigest()
-    if key not in _SIMPLIFIED:
+    tag = f"{faces} open3d {o3d.__version__}".encode()
+    key = hashlib.sha1(vertices.tobytes() + triangles.tobytes() + tag).hexdigest()
+    if key in _SIMPLIFIED:
+        return _SIMPLIFIED[key]
+    path = cache_dir() / f"{key}.npz"
+    surface = _load(path)
+    if surface is None:
         mesh = o3d.geometry.TriangleMesh(
             o3d.utility.Vector3dVector(vertices.astype(np.float64)),
             o3d.utility.Vector3iVector(triangles.astype(np.int32)),
@@ -68,12 +115,14 @@ def _simplified(
         small = mesh.simplify_quadric_decimation(faces)
         small.remove_unreferenced_vertices()
         small.compute_vertex_normals()
-        _SIMPLIFIED[key] = (
+        surface = (
             np.asarray(small.vertices, dtype=np.float32),
             np.asarray(small.triangles, dtype=np.int32),
             np.asarray(small.vertex_normals, dtype=np.float32),
         )
-    return _SIMPLIFIED[key]
+        _store(path, surface)
+    _SIMPLIFIED[key] = surface
+    return surface
 
 
 def _write_mesh(
