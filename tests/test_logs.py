@@ -254,6 +254,18 @@ def test_abort_and_exception_remove_part(tmp_path: Path) -> None:
     assert not part_path(path).exists() and not path.exists()
 
 
+def test_every_command_written_matches_its_schema(demo: tuple[Path, dict[str, list]]) -> None:
+    """write_command checks by hand what the schema asks: the messages it wrote pass the
+    schema's own validator (a mobile manipulator's base target included)."""
+    path, wr = demo
+    validator = tp.json_validator(tp.COMMAND)
+    with open(path, "rb") as f:
+        messages = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages([tp.COMMAND])]
+    assert len(messages) == len(wr["cmd"]) and any("base_target" in m for m in messages)
+    for m in messages:
+        assert not list(validator.iter_errors(m)), m
+
+
 def test_writer_refuses_bad_input(tmp_path: Path) -> None:
     with LogWriter(tmp_path / "x.mcap", metadata={}) as w:
         with pytest.raises(ValueError, match="POI"):
@@ -262,6 +274,15 @@ def test_writer_refuses_bad_input(tmp_path: Path) -> None:
             w.write_json(tp.DECISION, 0.0, {"candidates": []})  # no node
         with pytest.raises(ValueError, match="unknown topic"):
             w._write("/nope", 0, b"")
+        # Commands are checked by hand (not by the validator): what the schema refuses.
+        for bad in (
+            PoiCommand(0.0, np.array([0.4, 0.0, 0.3]), 1.0),
+            PoiCommand(0.0, np.array([0.4, 0.0, 0.3, 0.0]), 1.5),
+            PoiCommand(0.0, np.array([0.4, 0.0, 0.3, 0.0]), -0.1),
+            PoiCommand(0.0, np.array([0.4, 0.0, 0.3, 0.0]), 1.0, np.array([0.0, 0.0])),
+        ):
+            with pytest.raises(ValueError, match="/teleop/command: message does not match"):
+                w.write_command(bad)
         w.write_weight(1.0, 0.0)
         with pytest.raises(LogError, match="backwards on /scale/weight"):
             w.write_weight(0.5, 0.0)

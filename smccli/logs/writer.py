@@ -256,11 +256,18 @@ class LogWriter:
     # --- typed messages ---
 
     def write_command(self, cmd: PoiCommand) -> None:
+        """A command, checked here against what its schema asks (4 finite target numbers,
+        3 for a base, an opening in [0, 1]): a recording writes one per control period,
+        and the schema's validator made each cost 2.6 times as much (177 against 67 µs)."""
         target = _finite("command target", cmd.target)
-        msg: dict[str, Any] = {"target": target.tolist(), "gripper": float(cmd.gripper)}
+        gripper = float(cmd.gripper)
+        msg: dict[str, Any] = {"target": target.tolist(), "gripper": gripper}
         if cmd.base is not None:
             msg["base_target"] = _finite("command base target", cmd.base).tolist()
-        self.write_json(tp.COMMAND, cmd.t, msg)
+        shapes = target.shape == (4,) and (cmd.base is None or len(msg["base_target"]) == 3)
+        if not (shapes and 0.0 <= gripper <= 1.0):
+            raise ValueError(f"{tp.COMMAND}: message does not match its schema: {msg}")
+        self._write(tp.COMMAND, tp.to_ns(cmd.t), tp.encode_json(msg))
 
     def write_joint_state(self, js: JointState) -> None:
         msg = JointStates()
