@@ -106,6 +106,7 @@ bench: setup
 	$(PY) -m smccli.bench.cluster
 	$(PY) -m smccli.bench.learning
 	$(PY) -m smccli.bench.lookalike
+	$(PY) -m smccli.bench.lookalike_learning
 	$(PY) -m smccli.bench.look
 	$(PY) -m smccli.bench.ros1
 
@@ -117,6 +118,7 @@ bench-held-out: setup
 	$(PY) -m smccli.bench.look --seed held-out
 	$(PY) -m smccli.bench.learning --seed held-out
 	$(PY) -m smccli.bench.lookalike --seed held-out --trials 500
+	$(PY) -m smccli.bench.lookalike_learning --seed held-out
 	$(PY) -m smccli.bench.ros1 --seed held-out
 	mkdir -p bench_results docs/held_out
 	$(VENV)/bin/smc compile sample_logs/loco_manip/*.mcap -o bench_results/loco_manip_tree.json --rebuild

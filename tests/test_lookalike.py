@@ -173,3 +173,24 @@ def test_two_trials_end_to_end_on_any_number_of_workers(tmp_path) -> None:
         assert row["trial"] == i and row["gap_m"] == dr.gap and row["rgb"] == list(dr.rgb)
         assert row["outcome"] in OUTCOMES and row["success"] == (row["outcome"] == "success")
         assert row["indistinguishable"] in (True, False)
+
+
+def test_the_learning_curves_goal_is_the_greys_a_person_tells_apart() -> None:
+    """smccli/bench/lookalike_learning.py: the goal's figure counts grey look-alikes up to
+    0.65 that a person can tell apart; lighter greys, near-colours and twins stay out."""
+    from smccli.bench.lookalike_learning import curve_row
+
+    def row(i: int, grey: float | None, success: bool, twin: bool = False) -> dict:
+        return {
+            "trial": i, "kind": "grey" if grey is not None else "near", "grey": grey,
+            "gap_m": 0.05, "success": success, "outcome": "success" if success else "grasp_missed",
+            "reason": "", "indistinguishable": twin,
+        }  # fmt: skip
+
+    rows = [row(0, 0.40, True), row(1, 0.65, False), row(2, 0.66, False), row(3, None, False)]
+    rows.append(row(4, 0.50, False, twin=True))
+    point = curve_row(2, rows)
+    goal = point["goal"]
+    assert (goal["trials"], goal["successes"], goal["failures"]) == (2, 1, {"grasp_missed": 1})
+    assert (goal["indistinguishable"], point["overall"]["trials"]) == (1, 4)
+    assert [f["trial"] for f in point["failed_trials"]] == [1, 2, 3, 4]
