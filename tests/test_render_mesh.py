@@ -89,9 +89,7 @@ def test_simplifying_is_repeatable(soarm, tmp_path, monkeypatch) -> None:
         return render_model(model)
 
     def same(a, b) -> bool:
-        return np.array_equal(a.mesh_vert, b.mesh_vert) and np.array_equal(
-            a.mesh_face, b.mesh_face
-        )
+        return np.array_equal(a.mesh_vert, b.mesh_vert) and np.array_equal(a.mesh_face, b.mesh_face)
 
     first = drawn("a")
     files = sorted((tmp_path / "a" / "meshes").glob("*.npz"))
