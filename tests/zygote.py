@@ -25,6 +25,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 PRELOAD = (
@@ -125,6 +126,17 @@ def _child(request: dict) -> None:
     sys.exit(0)
 
 
+def _account(argv: list[str], wall: float, usage: os.struct_rusage) -> None:
+    """With ``SMC_CMDLOG`` set, append the command's argv, wall time and CPU time [s] (its
+    own and that of the children it waited for; not a campaign's Dask workers) as a JSON
+    line: where the suite's commands spend their time (docs/testing.md)."""
+    log = os.environ.get("SMC_CMDLOG")
+    if log:
+        cpu = usage.ru_utime + usage.ru_stime
+        with open(log, "a") as f:
+            f.write(json.dumps({"argv": argv, "wall_s": wall, "cpu_s": cpu}) + "\n")
+
+
 def _serve() -> None:
     """The zygote: import, then fork one child per request line until stdin closes."""
     sys.path.insert(0, sys.argv[1])
@@ -140,7 +152,9 @@ def _serve() -> None:
         if pid == 0:
             _child(request)
         print(json.dumps({"pid": pid}), file=reply, flush=True)
-        _, status = os.waitpid(pid, 0)
+        start = time.perf_counter()
+        _, status, usage = os.wait4(pid, 0)
+        _account(request["argv"], time.perf_counter() - start, usage)
         print(json.dumps({"rc": os.waitstatus_to_exitcode(status)}), file=reply, flush=True)
 
 
