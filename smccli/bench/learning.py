@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -97,6 +98,19 @@ def record_demos(work: Path, n: int, first: int = 0) -> list[Path]:
     return logs
 
 
+def merged_trees(
+    logs: Sequence[Path], demos: Sequence[int], work: Path
+) -> Iterator[tuple[int, Path]]:
+    """``(n, tree)`` for each ``n`` of ``demos``: the first ``n`` of ``logs`` compiled into a
+    new tree in ``work`` (the curve's points)."""
+    from smccli.learn.compile import compile_logs
+
+    for n in demos:
+        tree = work / f"tree_{n}.json"
+        compile_logs(list(logs[:n]), tree, rebuild=True)
+        yield n, tree
+
+
 def lookalike_separability(n_layouts: int, seed: int = 5) -> dict[str, Any]:
     """D_P (cluster part) of the white box against itself and against each look-alike over
     ``n_layouts`` random layouts of the scene, each through its own draw of the realistic
@@ -168,6 +182,12 @@ def figure(rows: list[dict[str, Any]], out: Path) -> str:
     return str(out)
 
 
+def _shown(path: Path) -> str:
+    """``path`` from the repository's top when it lies inside it, else as it is."""
+    path = path.resolve()
+    return str(path.relative_to(REPO)) if path.is_relative_to(REPO) else str(path)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--demos", type=int, nargs="+", default=[1, 2, 4, 8])
@@ -180,8 +200,6 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     args.out = args.out or results_dir(args.seed) / "bench_learning.json"
     args.fig = args.fig or results_dir(args.seed) / "img" / "bench_learning.png"
-    from smccli.learn.compile import compile_logs
-
     meta = machine()
     sep = lookalike_separability(args.separability_layouts)
     print(
@@ -193,9 +211,7 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         logs = record_demos(work, max(args.demos), first=args.seed)
-        for n in args.demos:
-            tree = work / f"tree_{n}.json"
-            compile_logs(logs[:n], tree, rebuild=True)
+        for n, tree in merged_trees(logs, args.demos, work):
             s = campaign(f"{n} demo(s)", tree, args.trials, seed=args.seed, workers=args.workers)
             print(campaign_line(f"{n} demonstration(s)", s), flush=True)
             rows.append(
@@ -220,7 +236,7 @@ def main(argv: list[str] | None = None) -> int:
         scripts=scripts,
         redone=redone,
         separability=sep,
-        figure=str(Path(figure(rows, args.fig)).resolve().relative_to(REPO)),
+        figure=_shown(Path(figure(rows, args.fig))),
     )
     return 0
 

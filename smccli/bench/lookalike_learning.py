@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from smccli.bench import lookalike
-from smccli.bench.learning import SCENE, clumsy_script, record_demos
+from smccli.bench.learning import SCENE, clumsy_script, merged_trees, record_demos
 from smccli.bench.meta import machine, write_rows
 from smccli.bench.seeds import results_dir, seed_option
 
@@ -85,17 +85,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, help="docs/bench_lookalike_learning.json, or held_out/")
     args = ap.parse_args(argv)
     args.out = args.out or results_dir(args.seed) / "bench_lookalike_learning.json"
-    from smccli.learn.compile import compile_logs
-
     meta = machine()
     cal = lookalike.calibrate(args.calibration_layouts)
     points = []
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         logs = record_demos(work, max(args.demos), first=args.seed)
-        for n in args.demos:
-            tree = work / f"tree_{n}.json"
-            compile_logs(logs[:n], tree, rebuild=True)
+        for n, tree in merged_trees(logs, args.demos, work):
             rows = lookalike.run_trials(
                 tree, args.seed, range(args.trials), args.workers, cal["threshold"]
             )
