@@ -166,6 +166,11 @@ DRIVE = {
 SHIFT = (KEY_LEFT_SHIFT, KEY_RIGHT_SHIFT)
 HELD = (*DRIVE, *SHIFT)
 """Keys whose state (down or up) the base mode reads each tick."""
+HUD_PERIOD = 0.1
+"""The overlay's numbers are redrawn at most this often [s of wall time]: the viewer's
+``set_texts`` waits for its render thread to draw a frame (20 ms a call under Xvfb's
+software GL, measured), and called every control period it held a session at a third of
+real time. A change of mode, gripper, marks or episode is shown at once."""
 
 
 def twist(held: Iterable[int]) -> np.ndarray:
@@ -295,6 +300,7 @@ class KeyboardOperator:
         self.last_task: str | None = None
         """The HUD's verdict on the previous demonstration (set by the session)."""
         self._placed: tuple[np.ndarray, np.ndarray] | None = None  # the marker's last pose
+        self._hud: tuple[object, float] | None = None  # what the overlay shows, since when
         self.mobile_manipulator = sim.mobile_manipulator
         """Base and arm: Tab switches what the keys move (:attr:`mode`)."""
         self.mode = "base" if self.mobile_manipulator else None
@@ -382,7 +388,12 @@ class KeyboardOperator:
         with self.viewer.lock():
             if self.viewer.user_scn is not None:
                 draw_scene(self.viewer.user_scn, self.sim, state)
-        self.viewer.set_texts(texts(state))
+        # The discrete fields at once, the numbers (time, poses) every HUD_PERIOD.
+        fields = (state.mode, state.gripper_open, state.marks, state.episode, state.last_task)
+        now = time.perf_counter()
+        if self._hud is None or self._hud[0] != fields or now - self._hud[1] >= HUD_PERIOD:
+            self.viewer.set_texts(texts(state))
+            self._hud = (fields, now)
 
     def _dragged(self) -> None:
         """Take the marker's pose as the target if the person moved it since the last tick
