@@ -27,13 +27,13 @@ from pathlib import Path
 from typing import Any
 
 from smccli.bench import lookalike
-from smccli.bench.learning import SCENE, clumsy_script, merged_trees, record_demos
+from smccli.bench.learning import REPO, SCENE, clumsy_script, merged_trees, record_demos
 from smccli.bench.meta import machine, write_rows
 from smccli.bench.seeds import results_dir, seed_option
 
-REPO = Path(__file__).resolve().parents[2]
 GOAL_GREY = 0.65
 """Issue 38's goal counts the grey look-alikes up to this grey level (the white box: 0.95)."""
+GOAL_BAND = f"greys <= {GOAL_GREY}"
 
 
 def in_goal(row: dict[str, Any]) -> bool:
@@ -44,8 +44,7 @@ def in_goal(row: dict[str, Any]) -> bool:
 def goal_band(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """Success over the goal's trials a person can tell apart (Wilson 95 %), the
     indistinguishable ones counted apart (:func:`~smccli.bench.lookalike.band_table`)."""
-    names = {True: f"greys <= {GOAL_GREY}", False: "other"}
-    return lookalike.band_table(rows, lambda r: names[in_goal(r)], [names[True]])[0]
+    return lookalike.band_table(rows, lambda r: GOAL_BAND if in_goal(r) else None, [GOAL_BAND])[0]
 
 
 def curve_row(n: int, rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
