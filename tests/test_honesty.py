@@ -47,6 +47,8 @@ SENSOR_READINGS = {
     "camera_matrix",
     "camera_pose",
     "camera_near",
+    # the camera driver's capability: whether it reads a window of the image alone
+    "camera_windows",
     # the command input, the clock and the files the robot was built from
     "step",
     "t",

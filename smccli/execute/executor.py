@@ -37,6 +37,7 @@ from smccli.execute.looking import (
     check_look_period,
     look,
     look_crop,
+    look_frame,
     steer,
 )
 from smccli.execute.matching import EdgeStack, equivalent, match_edges
@@ -45,6 +46,7 @@ from smccli.execute.plan import DURATION_CLIP, MAX_YAW_RATE, MIDWAY_PHASE, MIN_D
 from smccli.execute.policy import TreePolicy
 from smccli.execute.sensing import Sensors
 from smccli.execute.speed import MAX_POI_SPEED, at_speed, check_speed, peak_speed, speed_limit
+from smccli.execute.tracking import Track, still_there, track_of
 from smccli.learn.dmp import rollout
 from smccli.learn.tree import ROOT, Edge, Tree
 from smccli.perception import Cluster, scale_reading
@@ -173,6 +175,8 @@ class TreeExecutor:
         """Its base targets on the hand's clock (n, 4), when both move."""
         self._weights: deque[tuple[float, float]] = deque()
         """Recent scale readings (t [s], kg), the last ``weight_window`` of them."""
+        self._frame: CameraFrame | None = None
+        """The last decision point's camera frame."""
 
     # perception at a decision point: the same pipeline and instants as compile
     def observe(self) -> tuple[Observation, CameraFrame, float]:
@@ -181,7 +185,7 @@ class TreeExecutor:
         s = self.sensors
         t = s.t
         t0 = time.perf_counter()
-        frame = s.render_camera()
+        frame = self._frame = s.render_camera()
         if s.mobile_manipulator:  # every reading: a node decides as a base or as an arm
             scan, lidar_pose, geometry, base = (
                 s.lidar(),
@@ -387,6 +391,12 @@ class TreeExecutor:
         seen = plan.cluster
         assert seen is not None
         act = path[k].copy()  # where the hand acts on it: the grasp, or the goal
+        pp, near = self.params.perception, s.camera_view()[3]
+        # The decision's frame, where it saw the object: a look that finds it there to
+        # the pixel is spared perceiving (smccli.execute.tracking).
+        decided, track = self._frame, None
+        if decided is not None and plan.decision is not None and decided.t == plan.decision.t:
+            track = track_of(seen, decided, near, pp)
         next_look = s.t + self.look_period
         for i in range(1, k + 1):
             self._send(self._cmd(path[i], grip, i))
@@ -395,11 +405,15 @@ class TreeExecutor:
             next_look = s.t + self.look_period
             if np.linalg.norm(self._poi_now()[:3] - act[:3]) < LOOK_NEAR:
                 continue
-            clusters = look(s, seen, self.params.perception)
+            looked = self._look(seen, track)
+            if looked is None:
+                continue
+            frame, clusters = looked
             found = self.policy.look_again(plan, seen, clusters)
             if found is None:
                 continue
             seen, new_goal = found
+            track = track_of(seen, frame, near, pp)
             new = rollout(
                 edge.smc.action.dmp,
                 start=path[0],
@@ -410,6 +424,24 @@ class TreeExecutor:
             path = steer(path, new, i)
             goal, act = new_goal, path[k].copy()
         return path, goal
+
+    def _look(
+        self, seen: Cluster, track: Track | None
+    ) -> tuple[CameraFrame, tuple[Cluster, ...]] | None:
+        """A look at ``seen``: None where its ``track`` finds it where it was (nothing
+        perceived), else the look's frame and clusters."""
+        s, pp = self.sensors, self.params.perception
+        if track is not None and s.camera_windows:
+            # The window around the object alone first, and its depth alone.
+            if still_there(
+                track, s.render_camera(track.region, colour=False), s.robot_geometry(), pp
+            ):
+                return None
+            track = None
+        frame = look_frame(s, seen, pp)
+        if track is not None and still_there(track, frame, s.robot_geometry(), pp):
+            return None
+        return frame, look(s, seen, pp, frame)
 
     def _retreat(self) -> None:
         """Back the hand out of what it released: :data:`RETREAT` up along the approach

@@ -80,18 +80,26 @@ def look_crop(seen: Cluster, params: PerceptionParams) -> PerceptionParams:
     return replace(params, crop_min=tuple(lo.tolist()), crop_max=tuple(hi.tolist()))
 
 
-def look(sensors: Sensors, seen: Cluster, params: PerceptionParams) -> tuple[Cluster, ...]:
-    """The clusters of a look at ``seen``: a frame of the part of the image that can see
-    into :func:`look_crop`'s box (:func:`~smccli.perception.cloud.view_region`), the rest
-    left unread, perceived through that box (:func:`clusters_from_frame`).
+def look_frame(sensors: Sensors, seen: Cluster, params: PerceptionParams) -> CameraFrame:
+    """A look's frame: the part of the image that can see into :func:`look_crop`'s box
+    (:func:`~smccli.perception.cloud.view_region`), the rest left unread."""
+    K, T, shape, near = sensors.camera_view()
+    return sensors.render_camera(view_region(K, T, shape, near, look_crop(seen, params)))
+
+
+def look(
+    sensors: Sensors, seen: Cluster, params: PerceptionParams, frame: CameraFrame | None = None
+) -> tuple[Cluster, ...]:
+    """The clusters of a look at ``seen``: its frame (:func:`look_frame`, unless given)
+    perceived through :func:`look_crop`'s box (:func:`clusters_from_frame`).
 
     When that frame is the last look's to the bit and so are the robot's spheres that reach
     the box (nothing there moved; the self-filter removes the same points), its clusters
     are the last look's: perception would give them again from the same input.
     """
     crop = look_crop(seen, params)
-    K, T, shape, near = sensors.camera_view()
-    frame = sensors.render_camera(view_region(K, T, shape, near, crop))
+    if frame is None:
+        frame = look_frame(sensors, seen, params)
     geometry = sensors.robot_geometry()
     arm = _spheres_in(geometry, crop)
     last = _LAST_LOOK[0] if _LAST_LOOK else None

@@ -45,6 +45,9 @@ class Sensors:
         """The scene has a scale under the table."""
         self.has_lidar = sim.lidar_pose() is not None
         """The robot has a 2-D lidar."""
+        self.camera_windows = sim.camera_windows
+        """:meth:`render_camera` reads only the region asked for (a camera without a noise
+        model); else each call reads a whole frame, whatever the region."""
         self.mobile_manipulator = sim.mobile_manipulator
         """A base and an arm: :meth:`poi` is the hand in the base's frame, :meth:`base` the
         base's pose."""
@@ -98,10 +101,13 @@ class Sensors:
             raise SmcError(f"robot {self.robot.name!r} has no lidar")
         return pose
 
-    def render_camera(self, region: tuple[int, int, int, int] | None = None) -> CameraFrame:
+    def render_camera(
+        self, region: tuple[int, int, int, int] | None = None, colour: bool = True
+    ) -> CameraFrame:
         """An RGB-D frame; with ``region`` ``(v0, v1, u0, u1)`` only those rows and columns
-        are read (elsewhere no reading): :meth:`Sim.render_camera`."""
-        return self._sim.render_camera(region)
+        are read (elsewhere no reading), without ``colour`` the depth alone:
+        :meth:`Sim.render_camera`."""
+        return self._sim.render_camera(region, colour)
 
     def camera_view(self) -> tuple[np.ndarray, np.ndarray, tuple[int, int], float]:
         """The camera's intrinsics K (3, 3) [px], pose T_world_camera (4, 4, optical frame),

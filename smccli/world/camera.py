@@ -77,10 +77,11 @@ class CameraRenderer:
         return rgb, depth
 
     def region(
-        self, data: mujoco.MjData, region: tuple[int, int, int, int]
+        self, data: mujoco.MjData, region: tuple[int, int, int, int], colour: bool = True
     ) -> tuple[np.ndarray, np.ndarray]:
         """As :meth:`render`, drawing only rows ``v0:v1`` and columns ``u0:u1`` of
-        ``region``; the rest holds no reading (depth 0, black).
+        ``region``; the rest holds no reading (depth 0, black). Without ``colour`` only the
+        depth pass is drawn and the image stays black (half the time).
 
         The GL frustum is cut to that window and drawn in a viewport of its size: the same
         pixel rays at a fraction of the fill (llvmpipe's cost: about a third of a frame's
@@ -103,7 +104,7 @@ class CameraRenderer:
         flags = scene.flags.copy()
         out_rgb = np.empty((v1 - v0, u1 - u0, 3), dtype=np.uint8)
         buffer = np.empty((v1 - v0, u1 - u0), dtype=np.float32)
-        for segment in (False, True):
+        for segment in (False, True) if colour else (True,):
             r.update_scene(data, camera=self.cam_id, scene_option=self._option())
             for c in scene.camera:  # GL rows count up from the image's bottom
                 pixel = (c.frustum_top - c.frustum_bottom) / h
@@ -120,7 +121,8 @@ class CameraRenderer:
             else:
                 mujoco.mjr_readPixels(out_rgb, None, rect, ctx)
             np.copyto(scene.flags, flags)
-        rgb[v0:v1, u0:u1] = np.flipud(out_rgb)
+        if colour:
+            rgb[v0:v1, u0:u1] = np.flipud(out_rgb)
         depth[v0:v1, u0:u1] = np.flipud(self._metric(buffer))
         return rgb, depth
 

@@ -472,7 +472,15 @@ class Sim:
 
     # --- camera ------------------------------------------------------------------------
 
-    def render_camera(self, region: tuple[int, int, int, int] | None = None) -> CameraFrame:
+    @property
+    def camera_windows(self) -> bool:
+        """Whether :meth:`render_camera` reads only the region asked for: a camera without
+        noise; a noisy one reads whole frames (its draws cover all of it)."""
+        return self.sensor_noise.noise.camera == CameraNoise()
+
+    def render_camera(
+        self, region: tuple[int, int, int, int] | None = None, colour: bool = True
+    ) -> CameraFrame:
         """RGB and metric depth (along the optical axis) from the scene's sensor camera.
 
         ``region`` ``(v0, v1, u0, u1)``: only rows ``v0:v1`` and columns ``u0:u1`` are
@@ -481,12 +489,15 @@ class Sim:
         pixel on an edge, its depths may differ from them in the last bits (a micrometre:
         another projection matrix, :meth:`CameraRenderer.region`).
         A camera with noise renders the whole frame whatever ``region`` says: the noise's
-        draws cover all of it, and a region would change every later draw.
+        draws cover all of it, and a region would change every later draw. Without
+        ``colour`` a region's image stays black (its depth alone is drawn).
         """
-        if self.sensor_noise.noise.camera != CameraNoise():
+        if not self.camera_windows:
             region = None
         cam = self._camera
-        rgb, depth = cam.render(self.data) if region is None else cam.region(self.data, region)
+        rgb, depth = (
+            cam.render(self.data) if region is None else cam.region(self.data, region, colour)
+        )
         frame = CameraFrame(
             t=self.t,
             rgb=rgb,
