@@ -33,6 +33,10 @@ aligns the scan it sees to each stored scan of the tree, the same ones every tim
 their normals cost as much as a third of the ICP."""
 _TARGETS_KEPT = 64
 """Fewer valid beams than this make no outline to align [points]."""
+_OUTLINES: OrderedDict[tuple, tuple[np.ndarray, cKDTree]] = OrderedDict()
+"""The last target scans' beam end points and the k-d tree of their outline, by
+:func:`scan_key` and the outline's parameters: a decision's chamfer measures against the
+tree's stored scans, the same ones every time (the outline and its tree: 0.4 of 1 ms)."""
 
 
 # --- the scan ------------------------------------------------------------------------------
@@ -87,6 +91,11 @@ class Scan2D:
         ok = self.valid()
         a, r = self.angles()[ok], self.ranges[ok]
         return np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
+
+
+def scan_key(s: Scan2D) -> tuple[bytes, float, float, float]:
+    """A hashable key equal for scans with the same readings and beams (caches)."""
+    return (s.ranges.tobytes(), s.angle_min, s.angle_increment, s.range_max)
 
 
 def scan_to_dict(s: Scan2D) -> dict:
@@ -335,13 +344,28 @@ def chamfer(
     """
     params = params or ScanParams()
     R, t = T_target_source[:2, :2], T_target_source[:2, 2]
-    pts_t = target.points()
+    pts_t, tree_t = _target_outline(target, params)
     pts_s = source.points() @ R.T + t
-    line_t = outline(target, params)
     line_s = outline(source, params) @ R.T + t
-    d_st = cKDTree(line_t).query(pts_s)[0]
+    d_st = tree_t.query(pts_s)[0]
     d_ts = cKDTree(line_s).query(pts_t)[0]
     return 0.5 * (_trimmed_mean(d_st, params.keep) + _trimmed_mean(d_ts, params.keep))
+
+
+def _target_outline(target: Scan2D, params: ScanParams) -> tuple[np.ndarray, cKDTree]:
+    """The beam end points (k, 2) of ``target`` and the k-d tree of its :func:`outline`,
+    from :data:`_OUTLINES` when the same scan came before (neither is ever changed)."""
+    key = (scan_key(target), params.polyline_step, params.max_incidence, params.join_slack)
+    hit = _OUTLINES.get(key)
+    if hit is None:
+        pts = target.points()
+        pts.setflags(write=False)
+        hit = _OUTLINES[key] = (pts, cKDTree(outline(target, params)))
+        if len(_OUTLINES) > _TARGETS_KEPT:
+            _OUTLINES.popitem(last=False)
+    else:
+        _OUTLINES.move_to_end(key)
+    return hit
 
 
 def scan_distance(a: Scan2D, b: Scan2D, params: ScanParams | None = None) -> float:
