@@ -286,7 +286,8 @@ def align_scans(
     for T in seeds:
         for d in params.coarse_distances:
             T = icp(T, d)
-        results.append((T, *score(T)))
+        # A lone seed (tracking) wins unscored: one of its two evaluations saved.
+        results.append((T, *score(T)) if len(seeds) > 1 else (T, 0.0, 0.0))
     best_fit = max(f for _, f, _ in results)
     T, _, _ = min((r for r in results if r[1] >= best_fit - params.fitness_tie), key=lambda r: r[2])
     T = icp(T, params.fine_distance)
