@@ -20,6 +20,7 @@ from smccli.learn.smc import SalientPerceptions
 from smccli.perception.params import PerceptionParams
 from smccli.perception.room import d_room, room_histogram
 from smccli.perception.scan import (
+    Memo,
     Scan2D,
     ScanAlignment,
     align_scans,
@@ -212,6 +213,22 @@ def test_the_same_scans_align_to_the_same_bits(rng):
         for a in (align_scans(target, source) for _ in range(12))
     }
     assert len(runs) == 1
+
+
+def test_memo_makes_once_and_drops_the_least_recently_used():
+    made = []
+
+    def make(k: str):
+        return lambda: made.append(k) or k.upper()
+
+    memo: Memo[str] = Memo(2)
+    assert [memo.get(k, make(k)) for k in "abab"] == ["A", "B", "A", "B"]
+    assert made == ["a", "b"]
+    memo.get("a", make("a"))  # b is now the least recently used
+    memo.get("c", make("c"))
+    memo.get("a", make("a"))
+    memo.get("b", make("b"))
+    assert made == ["a", "b", "c", "b"]
 
 
 def test_the_taught_scans_align_once(rng):

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -40,15 +39,14 @@ from smccli.learn.smc import (
 from smccli.perception import Cluster, d_cluster
 from smccli.perception.distance import ClusterTerms, d_cluster_matrix, unmeasured
 from smccli.perception.room import d_room
-from smccli.perception.scan import align_scans, chamfer, scan_key
+from smccli.perception.scan import Memo, align_scans, chamfer, scan_key
 from smccli.world.geometry import compose, rotate_z, se2_pose, wrap, wrap_yaw
 
 INF = math.inf
-_TRANSFORMS: OrderedDict[tuple, np.ndarray | None] = OrderedDict()
+_TRANSFORMS: Memo[np.ndarray | None] = Memo(256)
 """:func:`scan_transform`'s last answers, by the two scans and the scan parameters: a run
 asks again, every trial, for the same two taught scans' alignment (whether two siblings
 are equivalent), each a full ICP search of about 20 ms."""
-_TRANSFORMS_KEPT = 256
 
 
 def scan_transform(
@@ -57,20 +55,17 @@ def scan_transform(
     """Where ``b``'s lidar sat in ``a``'s lidar frame, by ICP of their scans: SE(2) (3, 3);
     None unless both hold a scan. The same scans give the same answer (a copy, remembered:
     ICP is deterministic)."""
-    if a.scan is None or b.scan is None:
+    sa, sb = a.scan, b.scan
+    if sa is None or sb is None:
         return None
-    key = (scan_key(a.scan), scan_key(b.scan), params.scan)
-    if key in _TRANSFORMS:
-        _TRANSFORMS.move_to_end(key)
-    else:
+
+    def align() -> np.ndarray | None:
         try:
-            T: np.ndarray | None = align_scans(a.scan, b.scan, params.scan).T_target_source
+            return align_scans(sa, sb, params.scan).T_target_source
         except ValueError:  # too few returns to align: no common frame
-            T = None
-        _TRANSFORMS[key] = T
-        if len(_TRANSFORMS) > _TRANSFORMS_KEPT:
-            _TRANSFORMS.popitem(last=False)
-    T = _TRANSFORMS[key]
+            return None
+
+    T = _TRANSFORMS.get((scan_key(sa), scan_key(sb), params.scan), align)
     return None if T is None else T.copy()
 
 

@@ -16,8 +16,11 @@ matrices, ``T_a_b`` mapping points of frame b into frame a (:mod:`smccli.world.g
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass
+from typing import Generic, TypeVar
 
 import numpy as np
 import open3d as o3d
@@ -27,13 +30,40 @@ from smccli.world.geometry import se2, se2_pose, se2_se3
 
 _REG = o3d.pipelines.registration
 _MIN_POINTS = 10
-_TARGETS: OrderedDict[tuple[bytes, int], o3d.geometry.PointCloud] = OrderedDict()
+"""Fewer valid beams than this make no outline to align [points]."""
+_V = TypeVar("_V")
+
+
+class Memo(Generic[_V]):
+    """The last ``kept`` values made, by key, least recently used first out. For values
+    that are pure functions of their key and never changed by their users; safe across a
+    Dask worker's threads (the value is made outside the lock: two threads may both make
+    it, and get equal values)."""
+
+    def __init__(self, kept: int) -> None:
+        self.kept = kept
+        self._values: OrderedDict[Hashable, _V] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, key: Hashable, make: Callable[[], _V]) -> _V:
+        """The value of ``key``, made by ``make()`` unless kept."""
+        with self._lock:
+            if key in self._values:
+                self._values.move_to_end(key)
+                return self._values[key]
+        value = make()
+        with self._lock:
+            self._values[key] = value
+            while len(self._values) > self.kept:
+                self._values.popitem(last=False)
+        return value
+
+
+_TARGETS: Memo[o3d.geometry.PointCloud] = Memo(64)
 """The last target clouds with their normals, by points and neighbour count: a decision
 aligns the scan it sees to each stored scan of the tree, the same ones every time, and
 their normals cost as much as a third of the ICP."""
-_TARGETS_KEPT = 64
-"""Fewer valid beams than this make no outline to align [points]."""
-_OUTLINES: OrderedDict[tuple, tuple[np.ndarray, cKDTree]] = OrderedDict()
+_OUTLINES: Memo[tuple[np.ndarray, cKDTree]] = Memo(64)
 """The last target scans' beam end points and the k-d tree of their outline, by
 :func:`scan_key` and the outline's parameters: a decision's chamfer measures against the
 tree's stored scans, the same ones every time (the outline and its tree: 0.4 of 1 ms)."""
@@ -210,15 +240,7 @@ def _cloud(xy: np.ndarray, normals: np.ndarray | None = None) -> o3d.geometry.Po
 def _target_cloud(xy: np.ndarray, k: int) -> o3d.geometry.PointCloud:
     """:func:`_cloud` of target points (n, 2) with their normals, from :data:`_TARGETS` when
     the same points came before (ICP reads the target, never changes it)."""
-    key = (xy.tobytes(), k)
-    cloud = _TARGETS.get(key)
-    if cloud is None:
-        cloud = _TARGETS[key] = _cloud(xy, _normals_2d(xy, k))
-        if len(_TARGETS) > _TARGETS_KEPT:
-            _TARGETS.popitem(last=False)
-    else:
-        _TARGETS.move_to_end(key)
-    return cloud
+    return _TARGETS.get((xy.tobytes(), k), lambda: _cloud(xy, _normals_2d(xy, k)))
 
 
 def _checked_points(scan: Scan2D, role: str) -> np.ndarray:
@@ -357,16 +379,13 @@ def _target_outline(target: Scan2D, params: ScanParams) -> tuple[np.ndarray, cKD
     """The beam end points (k, 2) of ``target`` and the k-d tree of its :func:`outline`,
     from :data:`_OUTLINES` when the same scan came before (neither is ever changed)."""
     key = (scan_key(target), params.polyline_step, params.max_incidence, params.join_slack)
-    hit = _OUTLINES.get(key)
-    if hit is None:
+
+    def make() -> tuple[np.ndarray, cKDTree]:
         pts = target.points()
         pts.setflags(write=False)
-        hit = _OUTLINES[key] = (pts, cKDTree(outline(target, params)))
-        if len(_OUTLINES) > _TARGETS_KEPT:
-            _OUTLINES.popitem(last=False)
-    else:
-        _OUTLINES.move_to_end(key)
-    return hit
+        return pts, cKDTree(outline(target, params))
+
+    return _OUTLINES.get(key, make)
 
 
 def scan_distance(a: Scan2D, b: Scan2D, params: ScanParams | None = None) -> float:
