@@ -166,6 +166,21 @@ def test_vectorised_over_frames_and_poses_equals_one_by_one(
         np.testing.assert_array_equal(got, g.compose(frames[0], p))
 
 
+@EXAMPLES
+@given(st.one_of(planar, poi), st.one_of(planar, poi))
+def test_pose_floats_are_the_arrays_bits(a: np.ndarray, b: np.ndarray) -> None:
+    """The control loop's float path (a base's target through odometry, every period) gives
+    compose's and between's bits, whether the poses come as arrays or as Python floats."""
+    for inverse_a, f in ((False, g.compose), (True, g.between)):
+        want = f(a, b)
+        for x, y in ((a, b), (a.tolist(), b.tolist())):
+            got = g.pose_floats(x, y, inverse_a=inverse_a)
+            assert all(type(v) is float for v in got)
+            assert np.array(got).tobytes() == want.tobytes()
+    inv = g.pose_floats(a, np.zeros(len(a)).tolist(), inverse_a=True)
+    assert np.array(inv).tobytes() == g.inverse(a).tobytes()
+
+
 # --- spatial poses -------------------------------------------------------------------------
 
 

@@ -13,13 +13,18 @@ import json
 import numpy as np
 import pytest
 
+from smccli.learn.contingency import scan_transform
 from smccli.learn.frames import goal_from_scan, goal_in_scan
+from smccli.learn.params import SmcParams
+from smccli.learn.smc import SalientPerceptions
 from smccli.perception.params import PerceptionParams
 from smccli.perception.room import d_room, room_histogram
 from smccli.perception.scan import (
+    Memo,
     Scan2D,
     ScanAlignment,
     align_scans,
+    chamfer,
     scan_distance,
     scan_from_dict,
     scan_to_dict,
@@ -208,6 +213,68 @@ def test_the_same_scans_align_to_the_same_bits(rng):
         for a in (align_scans(target, source) for _ in range(12))
     }
     assert len(runs) == 1
+
+
+def test_memo_makes_once_and_drops_the_least_recently_used():
+    made = []
+
+    def make(k: str):
+        return lambda: made.append(k) or k.upper()
+
+    memo: Memo[str] = Memo(2)
+    assert [memo.get(k, make(k)) for k in "abab"] == ["A", "B", "A", "B"]
+    assert made == ["a", "b"]
+    memo.get("a", make("a"))  # b is now the least recently used
+    memo.get("c", make("c"))
+    memo.get("a", make("a"))
+    memo.get("b", make("b"))
+    assert made == ["a", "b", "c", "b"]
+
+
+def test_the_taught_scans_align_once(rng):
+    """scan_transform remembers its answer for the same two scans (a run asks again every
+    trial): a scan with the same readings gets the same bits, a copy the caller may
+    change; a scan with other readings is aligned anew."""
+    pose = np.r_[CENTRES["B"], -0.4]
+    a = cast(ROOMS["B"], pose, rng)
+    b = cast(ROOMS["B"], pose + [0.2, 0.1, 1.1], rng)
+    params = SmcParams()
+    T = scan_transform(
+        SalientPerceptions(None, None, scan=a), SalientPerceptions(None, None, scan=b), params
+    )
+    assert T is not None
+    assert T.tobytes() == align_scans(a, b, params.scan).T_target_source.tobytes()
+    T[:] = 0.0
+    same = Scan2D(a.ranges.copy(), a.angle_min, a.angle_increment, a.range_max)
+    again = scan_transform(
+        SalientPerceptions(None, None, scan=same), SalientPerceptions(None, None, scan=b), params
+    )
+    assert again is not None
+    assert again.tobytes() == align_scans(a, b, params.scan).T_target_source.tobytes()
+    other = cast(ROOMS["B"], pose + [0.1, -0.1, 0.5], rng)
+    moved = scan_transform(
+        SalientPerceptions(None, None, scan=other), SalientPerceptions(None, None, scan=b), params
+    )
+    assert moved is not None
+    assert moved.tobytes() == align_scans(other, b, params.scan).T_target_source.tobytes()
+
+
+def test_chamfer_remembers_only_the_same_target(rng):
+    """chamfer keeps a target scan's outline (a decision measures against the tree's stored
+    scans every time): the same readings give the same bits as a scan seen first; a target
+    with other readings is measured on its own outline."""
+    pose = np.r_[CENTRES["A"], 0.2]
+    fresh = cast(ROOMS["A"], pose, np.random.default_rng(11))
+    source = cast(ROOMS["A"], pose + [0.3, 0.2, -0.8], rng)
+    T = align_scans(fresh, source).T_target_source
+    first = chamfer(fresh, source, T)  # a target never seen: its outline built here
+    source_2 = cast(ROOMS["A"], pose + [-0.2, 0.1, 2.0], rng)
+    chamfer(fresh, source_2, align_scans(fresh, source_2).T_target_source)
+    copy = Scan2D(fresh.ranges.copy(), fresh.angle_min, fresh.angle_increment, fresh.range_max)
+    assert chamfer(copy, source, T) == first
+    assert chamfer(fresh, source, T) == first
+    nudged = Scan2D(fresh.ranges + 0.05, fresh.angle_min, fresh.angle_increment, fresh.range_max)
+    assert chamfer(nudged, source, T) != first
 
 
 # --- d_P -------------------------------------------------------------------------------

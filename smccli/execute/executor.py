@@ -369,11 +369,11 @@ class TreeExecutor:
             if al.fitness < RELOCALIZE_MIN_FITNESS:
                 continue  # out of sight of the stored place: odometry alone from here
             D_new = L @ np.linalg.inv(al.T_target_source)
-            cx, cy, cyaw = se2_pose(D_new @ np.linalg.inv(D))
+            correction = se2_pose(D_new @ np.linalg.inv(D))
+            cx, cy, cyaw = correction
             if math.hypot(cx, cy) > RELOCALIZE_MAX_STEP[0] or abs(cyaw) > RELOCALIZE_MAX_STEP[1]:
                 continue
-            C = D_new @ np.linalg.inv(D)
-            correction = se2_pose(C)  # base poses [x, y, 0, yaw] move with it, yaws unwrapped
+            # base poses [x, y, 0, yaw] move with the correction, yaws unwrapped
             path[i:] = compose(correction, path[i:])
             goal = compose(correction, goal)
             D = D_new

@@ -39,23 +39,34 @@ from smccli.learn.smc import (
 from smccli.perception import Cluster, d_cluster
 from smccli.perception.distance import ClusterTerms, d_cluster_matrix, unmeasured
 from smccli.perception.room import d_room
-from smccli.perception.scan import align_scans, chamfer
+from smccli.perception.scan import Memo, align_scans, chamfer, scan_key
 from smccli.world.geometry import compose, rotate_z, se2_pose, wrap, wrap_yaw
 
 INF = math.inf
+_TRANSFORMS: Memo[np.ndarray | None] = Memo(256)
+""":func:`scan_transform`'s last answers, by the two scans and the scan parameters: a run
+asks again, every trial, for the same two taught scans' alignment (whether two siblings
+are equivalent), each a full ICP search of about 20 ms."""
 
 
 def scan_transform(
     a: SalientPerceptions, b: SalientPerceptions, params: SmcParams
 ) -> np.ndarray | None:
     """Where ``b``'s lidar sat in ``a``'s lidar frame, by ICP of their scans: SE(2) (3, 3);
-    None unless both hold a scan."""
-    if a.scan is None or b.scan is None:
+    None unless both hold a scan. The same scans give the same answer (a copy, remembered:
+    ICP is deterministic)."""
+    sa, sb = a.scan, b.scan
+    if sa is None or sb is None:
         return None
-    try:
-        return align_scans(a.scan, b.scan, params.scan).T_target_source
-    except ValueError:  # too few returns to align: no common frame
-        return None
+
+    def align() -> np.ndarray | None:
+        try:
+            return align_scans(sa, sb, params.scan).T_target_source
+        except ValueError:  # too few returns to align: no common frame
+            return None
+
+    T = _TRANSFORMS.get((scan_key(sa), scan_key(sb), params.scan), align)
+    return None if T is None else T.copy()
 
 
 def d_p(

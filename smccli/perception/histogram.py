@@ -43,17 +43,20 @@ def _soft_bins(x: np.ndarray, n: int, circular: bool) -> tuple[np.ndarray, np.nd
 
 def hsv_histogram(rgb: np.ndarray, params: PerceptionParams) -> np.ndarray:
     """Colour histogram of pixels ``rgb`` (n, 3) uint8, shape (histogram_size,), sums to 1."""
-    c = np.asarray(rgb, dtype=np.float64).reshape(-1, 3) / 255.0
+    # Channel by channel (3, n): numpy's max and min over the short axis of (n, 3) were
+    # two thirds of a 320 x 240 room frame's 14 ms; elementwise they give the same values.
+    c = np.asarray(rgb).reshape(-1, 3).T.astype(np.float64, order="C") / 255.0
     hist = np.zeros(histogram_size(params))
-    if len(c) == 0:
+    if c.shape[1] == 0:
         return hist
-    vmax = c.max(axis=1)
-    vmin = c.min(axis=1)
+    r, g, b = c
+    vmax = np.maximum(np.maximum(r, g), b)
+    vmin = np.minimum(np.minimum(r, g), b)
     chroma = vmax - vmin
     chromatic = chroma >= params.chroma_threshold
     # Hue in [0, 1) (the HSV hexagon), computed only for chromatic pixels.
-    cc, cmax, cch = c[chromatic], vmax[chromatic], chroma[chromatic]
-    r, g, b = cc[:, 0], cc[:, 1], cc[:, 2]
+    cmax, cch = vmax[chromatic], chroma[chromatic]
+    r, g, b = r[chromatic], g[chromatic], b[chromatic]
     hue = (
         np.where(
             cmax == r,

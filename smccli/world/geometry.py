@@ -24,6 +24,7 @@ over leading axes.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -163,6 +164,15 @@ def _one_pose(a: np.ndarray, b: np.ndarray, *, inverse_a: bool) -> np.ndarray:
     """:func:`compose` (or :func:`between` with ``inverse_a``) of one pose with one pose,
     the same operations on Python floats: the mobile base's odometry calls them every
     control period, where numpy's per-call overhead was most of a step's cost."""
+    return np.array(pose_floats(a, b, inverse_a=inverse_a))
+
+
+def pose_floats(
+    a: np.ndarray | Sequence[float], b: np.ndarray | Sequence[float], *, inverse_a: bool = False
+) -> list[float]:
+    """:func:`compose` (or :func:`between` with ``inverse_a``) of one pose ``a`` (3,) or (4,)
+    with one pose ``b``, as a list of Python floats: the same operations and bits as the
+    arrays', for a loop that runs every control period and needs no array."""
     c, s = float(np.cos(a[-1])), float(np.sin(a[-1]))  # numpy's cos/sin, as for arrays
     ax, ay, ayaw = float(a[0]), float(a[1]), float(a[-1])
     bx, by, byaw = float(b[0]), float(b[1]), float(b[-1])
@@ -175,7 +185,7 @@ def _one_pose(a: np.ndarray, b: np.ndarray, *, inverse_a: bool) -> np.ndarray:
         z = float(b[2])
         out.append((z - float(a[2]) if inverse_a else z + float(a[2])) if len(a) == 4 else z)
     out.append(byaw - ayaw if inverse_a else ayaw + byaw)
-    return np.array(out)
+    return out
 
 
 def inverse(a: ArrayLike) -> np.ndarray:

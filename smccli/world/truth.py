@@ -118,6 +118,8 @@ class Truth:
         """Names of what the robot's collision geoms touch now, floor excluded (a mobile
         base's collisions; a mobile manipulator's hand is left out)."""
         m, d, robot = self.model, self.data, self.sim.robot
+        if d.ncon == 0:  # a base in free space, most periods: the sets below cost 1.5 us
+            return []
         mine = set(self._robot_geoms)
         if self.sim.mobile_manipulator:
             # Its hand is meant to touch: the fingers and the body they ride on (the palm)
