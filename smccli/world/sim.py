@@ -480,13 +480,17 @@ class Sim:
         holds no reading (depth 0, black). Its colours are the whole frame's but for a rare
         pixel on an edge, its depths may differ from them in the last bits (a micrometre:
         another projection matrix, :meth:`CameraRenderer.region`).
-        A camera with noise renders the whole frame whatever ``region`` says: the noise's
-        draws cover all of it, and a region would change every later draw.
+        A camera with noise renders the whole frame whatever ``region`` says (the noise's
+        draws depend on which pixels of it have a reading) and adds noise to the window
+        alone: its pixels are those of the whole noisy frame to the bit, and every later
+        draw is the same (:meth:`NoisySensors.frame`).
         """
-        if self.sensor_noise.noise.camera != CameraNoise():
-            region = None
         cam = self._camera
-        rgb, depth = cam.render(self.data) if region is None else cam.region(self.data, region)
+        noisy = self.sensor_noise.noise.camera != CameraNoise()
+        if region is None or noisy:
+            rgb, depth = cam.render(self.data)
+        else:
+            rgb, depth = cam.region(self.data, region)
         frame = CameraFrame(
             t=self.t,
             rgb=rgb,
@@ -495,7 +499,7 @@ class Sim:
             T_world_camera=self.camera_pose(),
             frame_id="camera",
         )
-        return self.sensor_noise.frame(frame)
+        return self.sensor_noise.frame(frame, region) if noisy else frame
 
     def camera_near(self) -> float:
         """The camera's near clipping distance [m]: no depth reading is nearer."""
