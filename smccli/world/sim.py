@@ -480,15 +480,19 @@ class Sim:
         holds no reading (depth 0, black). Its colours are the whole frame's but for a rare
         pixel on an edge, its depths may differ from them in the last bits (a micrometre:
         another projection matrix, :meth:`CameraRenderer.region`).
-        A camera with noise renders the whole frame whatever ``region`` says (the noise's
-        draws depend on which pixels of it have a reading) and adds noise to the window
-        alone: its pixels are those of the whole noisy frame to the bit, and every later
-        draw is the same (:meth:`NoisySensors.frame`).
+        A camera with noise renders the whole frame's depth whatever ``region`` says (the
+        noise's draws depend on which pixels of it have a reading, its holes on the depth
+        edges) and the window's colours alone (:meth:`CameraRenderer.colour_region`), and
+        adds noise to the window alone: its depths are those of the whole noisy frame to
+        the bit, its colours too but for a rare pixel on an edge, and every later draw is
+        the same (:meth:`NoisySensors.frame`).
         """
         cam = self._camera
         noisy = self.sensor_noise.noise.camera != CameraNoise()
-        if region is None or noisy:
+        if region is None:
             rgb, depth = cam.render(self.data)
+        elif noisy:
+            rgb, depth = cam.colour_region(self.data, region)
         else:
             rgb, depth = cam.region(self.data, region)
         frame = CameraFrame(
