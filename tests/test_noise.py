@@ -196,3 +196,32 @@ def test_camera_model_is_the_full_frame_formula_to_the_bit(dropouts) -> None:
             assert np.array_equal(got.depth, want.depth, equal_nan=True)
             assert np.array_equal(np.signbit(got.depth), np.signbit(want.depth))
         assert a.rng.random() == b.rng.random()
+
+
+@pytest.mark.parametrize(
+    "region",
+    [(0, 120, 0, 160), (30, 95, 41, 118), (0, 7, 150, 160), (119, 120, 0, 1), (5, 5, 3, 9)],
+)
+def test_a_window_is_the_whole_noisy_frame_there_to_the_bit(region) -> None:
+    """NoisySensors.frame with a window: its pixels are the full-frame formula's to the bit
+    (its edges see their neighbours outside it), no reading elsewhere, and the generator
+    is left where the whole frame leaves it; holes (0, inf, nan) outside the window too."""
+    rng = np.random.default_rng(8)
+    depth = np.repeat(np.repeat(rng.uniform(0.3, 2.0, (12, 16)), 10, 0), 10, 1)
+    depth += rng.normal(0, 0.002, depth.shape)
+    depth[rng.random(depth.shape) < 0.05] = 0.0
+    depth[:3, :4], depth[5, 7:12], depth[40, 30:60] = np.inf, np.nan, np.inf
+    rgb = np.repeat(np.repeat(rng.integers(0, 256, (12, 16, 3)), 10, 0), 10, 1).astype(np.uint8)
+    frame = _frame(depth, rgb)
+    v0, v1, u0, u1 = region
+    inside = np.zeros(depth.shape, dtype=bool)
+    inside[v0:v1, u0:u1] = True
+    for seed in range(3):
+        a, b = NoisySensors(REALISTIC, seed), NoisySensors(REALISTIC, seed)
+        for _ in range(2):
+            got, want = a.frame(frame, region), _frame_as_written(b, frame)
+            assert got.rgb.dtype == want.rgb.dtype and got.depth.dtype == want.depth.dtype
+            assert np.array_equal(got.rgb[inside], want.rgb[inside])
+            assert np.array_equal(got.depth[inside], want.depth[inside], equal_nan=True)
+            assert not got.depth[~inside].any() and not got.rgb[~inside].any()
+        assert a.rng.random() == b.rng.random()

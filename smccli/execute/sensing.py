@@ -46,8 +46,9 @@ class Sensors:
         self.has_lidar = sim.lidar_pose() is not None
         """The robot has a 2-D lidar."""
         self.camera_windows = sim.camera_windows
-        """:meth:`render_camera` reads only the region asked for (a camera without a noise
-        model); else each call reads a whole frame, whatever the region."""
+        """:meth:`render_camera` of a region draws that region alone (a camera without a
+        noise model); a noisy camera's every frame costs a whole frame's depth and noise,
+        and a frame more changes the noise of every later one."""
         self.mobile_manipulator = sim.mobile_manipulator
         """A base and an arm: :meth:`poi` is the hand in the base's frame, :meth:`base` the
         base's pose."""

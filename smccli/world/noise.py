@@ -180,42 +180,88 @@ class NoisySensors:
         self.scale_offset = self.rng.uniform(-s.offset, s.offset) if not noise.ideal else 0.0
         self.scale_drift = self.rng.uniform(-s.drift, s.drift) if not noise.ideal else 0.0
 
-    def frame(self, frame: CameraFrame) -> CameraFrame:
-        """The frame as the camera would give it: noisy depth with holes, noisy colour."""
+    def frame(
+        self, frame: CameraFrame, region: tuple[int, int, int, int] | None = None
+    ) -> CameraFrame:
+        """The frame as the camera would give it: noisy depth with holes, noisy colour.
+
+        ``region`` ``(v0, v1, u0, u1)``: only rows ``v0:v1`` and columns ``u0:u1`` are
+        read, the rest of the image holds no reading (depth 0, black). The generator draws
+        for the whole frame all the same (below): those pixels are the whole frame's to the
+        bit, and every later draw is as without ``region``. ``frame.depth`` must then hold
+        the whole image's readings (which pixels have one, and the window's neighbours for
+        its edges); ``frame.rgb`` only the window's.
+
+        Draws per frame, in this order: one standard normal per pixel with a reading (finite,
+        > 0) of the whole image in row-major order (depth), one uniform per pixel (holes),
+        three standard normals per pixel (colour, row-major, channels last).
+        """
         c = self.noise.camera
         if c == CameraNoise():
             return frame
         rng = self.rng
-        depth = frame.depth.astype(np.float32, copy=True)
-        valid = np.isfinite(depth) & (depth > 0)
-        seen = depth[valid]  # sigma only where a reading is: the same float32 arithmetic
+        h, w = frame.depth.shape
+        v0, v1, u0, u1 = (0, h, 0, w) if region is None else region
+        full = frame.depth
+        valid = np.isfinite(full) & (full > 0)
+        normals = rng.standard_normal(np.count_nonzero(valid))
+        depth = full[v0:v1, u0:u1].astype(np.float32, copy=True)
+        seen_at = valid[v0:v1, u0:u1]
+        if region is not None:
+            # The window's readings' places in those draws: the readings before its rows,
+            # then a running count along its rows (full width: the row-major order).
+            rank = np.cumsum(valid[v0:v1], axis=None).reshape(v1 - v0, w)[:, u0:u1]
+            rank += np.count_nonzero(valid[:v0]) - 1
+            normals = normals[rank[seen_at]]
+        seen = depth[seen_at]  # sigma only where a reading is: the same float32 arithmetic
         sigma = c.depth_a + c.depth_b * (seen - c.depth_z0) ** 2
-        depth[valid] = seen + (rng.standard_normal(len(seen)) * sigma).astype(np.float32)
-        rgb = frame.rgb.astype(np.float32) / 255.0
-        luma = rgb @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
-        jump = np.zeros(depth.shape, dtype=bool)
-        with np.errstate(invalid="ignore"):  # inf - inf beside a hole: nan, not a jump
-            dz_x = np.abs(np.diff(frame.depth, axis=1)) > c.edge_jump
-            dz_y = np.abs(np.diff(frame.depth, axis=0)) > c.edge_jump
-        jump[:, 1:] |= dz_x
-        jump[:, :-1] |= dz_x
-        jump[1:, :] |= dz_y
-        jump[:-1, :] |= dz_y
+        depth[seen_at] = seen + (normals * sigma).astype(np.float32)
+        # Colour of whole rows: matmul runs its kernel image row by image row, and each
+        # window pixel's luma is then the whole image's to the bit.
+        rows = frame.rgb[v0:v1].astype(np.float32) / 255.0
+        luma = (rows @ np.array([0.299, 0.587, 0.114], dtype=np.float32))[:, u0:u1]
+        kind = self._jump(full, (v0, v1, u0, u1)).view(np.uint8)
+        kind += 2 * (luma < c.dark_luma).view(np.uint8)
         # A pixel's dropout probability: the largest of those its kinds have, looked up by
         # kind (edge, dark) instead of two full-frame maxima; float64, as drawn against.
         anywhere = float(np.float32(c.dropout))
         edge, dark = max(anywhere, c.edge_dropout), max(anywhere, c.dark_dropout)
         p = np.array([anywhere, edge, dark, max(edge, dark)])
-        kind = jump.view(np.uint8) + 2 * (luma < c.dark_luma).view(np.uint8)
-        depth[rng.random(depth.shape) < p[kind]] = 0.0
+        depth[rng.random((h, w))[v0:v1, u0:u1] < p[kind]] = 0.0
         depth[depth < 0] = 0.0
+        rgb = rows if region is None else rows[:, u0:u1].copy()
         rgb *= self.gain.astype(np.float32)
-        grain = rng.standard_normal(rgb.shape).astype(np.float32)
+        grain = rng.standard_normal((h, w, 3))[v0:v1, u0:u1].astype(np.float32)
         grain *= c.colour_sigma
         rgb += grain
         rgb *= 255.0
         out = np.clip(np.rint(rgb, out=rgb), 0, 255, out=rgb).astype(np.uint8)
-        return replace(frame, rgb=out, depth=depth)
+        if region is None:
+            return replace(frame, rgb=out, depth=depth)
+        whole_rgb = np.zeros((h, w, 3), dtype=np.uint8)
+        whole_rgb[v0:v1, u0:u1] = out
+        whole_depth = np.zeros((h, w), dtype=np.float32)
+        whole_depth[v0:v1, u0:u1] = depth
+        return replace(frame, rgb=whole_rgb, depth=whole_depth)
+
+    def _jump(self, depth: np.ndarray, region: tuple[int, int, int, int]) -> np.ndarray:
+        """The depth edges (bool) in ``region``'s window of the noiseless ``depth`` (h, w)
+        [m]: a jump over ``edge_jump`` to a 4-neighbour."""
+        c = self.noise.camera
+        h, w = depth.shape
+        v0, v1, u0, u1 = region
+        # The window grown by a pixel each way (within the image): its edges' neighbours.
+        a0, a1, b0, b1 = max(v0 - 1, 0), min(v1 + 1, h), max(u0 - 1, 0), min(u1 + 1, w)
+        near = depth[a0:a1, b0:b1]
+        jump = np.zeros(near.shape, dtype=bool)
+        with np.errstate(invalid="ignore"):  # inf - inf beside a hole: nan, not a jump
+            dz_x = np.abs(np.diff(near, axis=1)) > c.edge_jump
+            dz_y = np.abs(np.diff(near, axis=0)) > c.edge_jump
+        jump[:, 1:] |= dz_x
+        jump[:, :-1] |= dz_x
+        jump[1:, :] |= dz_y
+        jump[:-1, :] |= dz_y
+        return jump[v0 - a0 : v1 - a0, u0 - b0 : u1 - b0]
 
     def weight(self, t: float, weight: float) -> float:
         """A scale reading [kg] at time ``t`` [s]."""

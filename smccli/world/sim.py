@@ -476,8 +476,9 @@ class Sim:
 
     @property
     def camera_windows(self) -> bool:
-        """Whether :meth:`render_camera` reads only the region asked for: a camera without
-        noise; a noisy one reads whole frames (its draws cover all of it)."""
+        """Whether :meth:`render_camera` of a region draws that region alone and nothing
+        else: a camera without noise. A noisy one draws the noise of a whole frame at
+        every frame (a frame more changes every later draw) and its whole depth."""
         return self.sensor_noise.noise.camera == CameraNoise()
 
     def render_camera(
@@ -490,16 +491,21 @@ class Sim:
         holds no reading (depth 0, black). Its colours are the whole frame's but for a rare
         pixel on an edge, its depths may differ from them in the last bits (a micrometre:
         another projection matrix, :meth:`CameraRenderer.region`).
-        A camera with noise renders the whole frame whatever ``region`` says: the noise's
-        draws cover all of it, and a region would change every later draw. Without
-        ``colour`` a region's image stays black (its depth alone is drawn).
+        A camera with noise renders the whole frame's depth whatever ``region`` says (the
+        noise's draws depend on which pixels of it have a reading, its holes on the depth
+        edges) and the window's colours alone (:meth:`CameraRenderer.colour_region`), and
+        adds noise to the window alone: its depths are those of the whole noisy frame to
+        the bit, its colours too but for a rare pixel on an edge, and every later draw is
+        the same (:meth:`NoisySensors.frame`). Without ``colour`` a camera without noise
+        draws the window's depth alone (its image black).
         """
-        if not self.camera_windows:
-            region = None
         cam = self._camera
-        rgb, depth = (
-            cam.render(self.data) if region is None else cam.region(self.data, region, colour)
-        )
+        if region is None:
+            rgb, depth = cam.render(self.data)
+        elif not self.camera_windows:
+            rgb, depth = cam.colour_region(self.data, region)
+        else:
+            rgb, depth = cam.region(self.data, region, colour)
         frame = CameraFrame(
             t=self.t,
             rgb=rgb,
@@ -508,7 +514,7 @@ class Sim:
             T_world_camera=self.camera_pose(),
             frame_id="camera",
         )
-        return self.sensor_noise.frame(frame)
+        return frame if self.camera_windows else self.sensor_noise.frame(frame, region)
 
     def camera_near(self) -> float:
         """The camera's near clipping distance [m]: no depth reading is nearer."""
