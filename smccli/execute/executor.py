@@ -391,7 +391,7 @@ class TreeExecutor:
         seen = plan.cluster
         assert seen is not None
         act = path[k].copy()  # where the hand acts on it: the grasp, or the goal
-        pp, near = self.params.perception, s.camera_view()[3]
+        pp, near = self.params.perception, s.camera_near()
         # The decision's frame, where it saw the object: a look that finds it there to
         # the pixel is spared perceiving (smccli.execute.tracking).
         decided, track = self._frame, None

@@ -122,6 +122,10 @@ class Sensors:
             self._sim.camera_near(),
         )
 
+    def camera_near(self) -> float:
+        """The camera's near clipping distance [m]: no depth reading is nearer."""
+        return self._sim.camera_near()
+
     def robot_geometry(self) -> RobotGeometry:
         """The robot's own links from its kinematic model and joint readings (self-filter)."""
         return self._sim.robot_geometry()

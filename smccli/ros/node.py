@@ -172,6 +172,8 @@ class RobotSensors:
     a transform is lost, the robot stops answering or Ctrl-C was pressed."""
 
     mobile_manipulator = False
+    camera_windows = False
+    """A camera gives whole frames (:attr:`smccli.execute.sensing.Sensors.camera_windows`)."""
 
     def __init__(self, bus: Bus, scene: Scene, topic_map: TopicMap, spec: RunSpec) -> None:
         self.bus, self.inbox, self.scene, self.map, self.spec = (
@@ -426,9 +428,11 @@ class RobotSensors:
             raise RobotStop("tf_lost" if "tf_lost" in got else "stale_sensors", got)
         return got
 
-    def render_camera(self, region: tuple[int, int, int, int] | None = None) -> CameraFrame:
-        """The first colour image stamped at or after now, with its depth (``region`` is
-        the simulator's rendering shortcut: a camera gives whole frames)."""
+    def render_camera(
+        self, region: tuple[int, int, int, int] | None = None, colour: bool = True
+    ) -> CameraFrame:
+        """The first colour image stamped at or after now, with its depth (``region`` and
+        ``colour`` are the simulator's rendering shortcuts: a camera gives whole frames)."""
         self._fresh(lambda: self.inbox.color, f"colour image on {self.map.topics['color']}")
         stamp = self.inbox.color[-1][0]
         frame_id = self.inbox.color[-1][1]
@@ -453,6 +457,10 @@ class RobotSensors:
         """K, T_world_camera of the latest image, image shape (h, w), near distance [m]."""
         frame = self.render_camera()
         return frame.K, frame.T_world_camera, frame.depth.shape[:2], self._near  # type: ignore[return-value]
+
+    def camera_near(self) -> float:
+        """The near clipping distance of the scene's camera model [m]."""
+        return self._near
 
     def robot_geometry(self) -> RobotGeometry:
         js = self.joint_state()
