@@ -453,3 +453,27 @@ def test_a_geom_in_the_sensors_hidden_group_is_refused(user_scene: Path) -> None
         load_scene(user_scene)
     msg = str(info.value)
     assert "\n" not in msg and "geom floor in group 5, which no sensor sees" in msg, msg
+
+
+def test_each_model_is_fresh_but_a_scene_compiles_once_per_process(monkeypatch):
+    """Scene.model() gives a model of its own each call (a layout may rewrite it), copied
+    from the one compiled the first time: the same numbers, no second compile."""
+    import mujoco
+
+    scene = load_scene("pick_place")
+    first = scene.model()
+    compiles = []
+    compile_xml = mujoco.MjModel.from_xml_string
+
+    def counted(*args, **kwargs):
+        compiles.append(1)
+        return compile_xml(*args, **kwargs)
+
+    monkeypatch.setattr(mujoco.MjModel, "from_xml_string", counted)
+    second = scene.model()
+    assert compiles == [] and second is not first
+    for name in ("body_pos", "geom_size", "geom_rgba", "jnt_range", "mesh_vert"):
+        np.testing.assert_array_equal(getattr(first, name), getattr(second, name))
+    second.body_pos[1, 0] += 1.0  # its own copy
+    assert first.body_pos[1, 0] != second.body_pos[1, 0]
+    assert scene.model().body_pos[1, 0] == first.body_pos[1, 0]
