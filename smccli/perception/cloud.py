@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import threading
 
 import numpy as np
@@ -240,13 +241,26 @@ def self_filter_mask(points: np.ndarray, robot: RobotGeometry | None) -> np.ndar
     radii = np.asarray(robot.radii, dtype=np.float64)
     # A k-d tree names the few (point, sphere) pairs that can be inside (the radius a hair
     # wider than the test's): a test of every point against each of the ~50 spheres took
-    # 5 ms a decision. The test itself is the same arithmetic on those pairs.
-    tree = cKDTree(points)
-    near = tree.query_ball_point(centers, radii * (1 + 1e-9) + 1e-12, return_sorted=False)
-    sphere = np.repeat(np.arange(len(radii)), [len(n) for n in near])
-    if not len(sphere):
+    # 5 ms a decision. The test itself is the same arithmetic on those pairs. The tree
+    # holds only the points in the spheres' bounding box (about half of a decision's), and
+    # unbalanced it builds in half the time; any tree names every pair the test keeps:
+    # 2.1 to 0.9 ms a decision.
+    reach = radii * (1 + 1e-9) + 1e-12
+    lo, hi = (centers - reach[:, None]).min(axis=0), (centers + reach[:, None]).max(axis=0)
+    box = (points[:, 0] >= lo[0]) & (points[:, 0] <= hi[0])
+    for k in (1, 2):
+        box &= (points[:, k] >= lo[k]) & (points[:, k] <= hi[k])
+    candidates = np.flatnonzero(box)
+    if not len(candidates):
         return keep
-    point = np.concatenate([np.asarray(n, dtype=np.int64) for n in near])
+    tree = cKDTree(points[candidates], balanced_tree=False, compact_nodes=False)
+    near = tree.query_ball_point(centers, reach, return_sorted=False)
+    counts = [len(n) for n in near]
+    total = sum(counts)
+    if not total:
+        return keep
+    sphere = np.repeat(np.arange(len(radii)), counts)
+    point = candidates[np.fromiter(itertools.chain.from_iterable(near), np.int64, total)]
     d = points[point] - centers[sphere]
     inside = ~(np.einsum("ij,ij->i", d, d) > radii[sphere] * radii[sphere])
     keep[point[inside]] = False
