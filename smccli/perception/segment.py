@@ -278,7 +278,8 @@ class Segmentation:
     planes: list[np.ndarray]
     """Support planes ``[a, b, c, d]`` found (the table first)."""
     table: tuple[np.ndarray, np.ndarray]
-    """The table's points (m, 3) [m] and colours (m, 3) uint8 (relative brightness)."""
+    """The table's points (m, 3) [m] and colours (m, 3) uint8 (relative brightness; none
+    with it off)."""
     labels: np.ndarray
     """Cluster of each point, shape (n,) int; -1 = noise."""
     cut: np.ndarray
