@@ -66,17 +66,17 @@ def attach_hidden_parts(
     h, w = np.asarray(frame.depth).shape[:2]
     u, v, z = _pixels(points, frame)
     inside = (labels >= 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
-    index = np.full((h, w), -1, dtype=np.int64)
-    index[v[inside], u[inside]] = np.flatnonzero(inside)
     idx = np.flatnonzero(inside)
+    # A one-pixel border of no point: a neighbour's flat index is the pixel's plus a
+    # constant, no bounds to test (as in :func:`outline_points`).
+    index = np.full((h + 2) * (w + 2), -1, dtype=np.int64)
+    at = (v[idx] + 1) * (w + 2) + (u[idx] + 1)
+    index[at] = idx
     pairs = []
     for du, dv in ((1, 0), (0, 1), (1, 1), (1, -1)):  # each unordered neighbour pair once
-        uu, vv = u[idx] + du, v[idx] + dv
-        ok = (uu >= 0) & (uu < w) & (vv >= 0) & (vv < h)
-        i = idx[ok]
-        j = index[vv[ok], uu[ok]]
+        j = np.take(index, at + (dv * (w + 2) + du))
         keep = j >= 0
-        i, j = i[keep], j[keep]
+        i, j = idx[keep], j[keep]
         keep = labels[i] != labels[j]
         pairs.append(np.stack([i[keep], j[keep]], axis=1))
     ij = np.concatenate(pairs)
