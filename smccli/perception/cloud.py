@@ -312,8 +312,9 @@ def _table_plane(
     if len(points) < 3:
         return None, None
     if start is not None:
-        dist = plane_distance(points, start)
-        mask = np.abs(dist) < params.plane_distance
+        # Not kept: holding these 0.5 MB through the refinement made it 1.6 ms slower
+        # (its own arrays no longer fit in the freed memory: fresh pages).
+        mask = np.abs(plane_distance(points, start)) < params.plane_distance
         if 2 * np.count_nonzero(mask) >= len(points):
             plane, fixed, dist = _refine_plane(points, mask, params)
             if fixed:
