@@ -389,9 +389,21 @@ next frame's refinement starts (:func:`fit_table_plane`)."""
 
 def plane_distance(points: np.ndarray, plane: np.ndarray) -> np.ndarray:
     """Signed distance of points (n, 3) to ``plane`` [a, b, c, d] (unit normal), shape (n,) [m]."""
-    # einsum, not ``points @ normal``: BLAS threads spin for ~20 ms on a busy 2-core
-    # machine for what is a few microseconds of work.
-    return np.einsum("ni,i->n", points, plane[:3]) + plane[3]
+    # Not ``points @ normal``: BLAS threads spin for ~20 ms on a busy 2-core machine for
+    # what is a few microseconds of work, but ``np.einsum("ni,i->n", points, plane[:3])``,
+    # which trees were compiled with. On float64 rows contiguous in memory (every cloud
+    # here) it sums each row's products as (x a + z c) + y b (its SIMD lanes): so does this,
+    # column by column, equal to the bit on 300 k random rows and every campaign frame
+    # tried, 0.32 to 0.12 ms for a table's 67 k points. Other layouts sum in other orders.
+    if points.dtype != np.float64 or points.strides[1] != points.itemsize:
+        return np.einsum("ni,i->n", points, plane[:3]) + plane[3]
+    out = points[:, 0] * plane[0]
+    term = points[:, 2] * plane[2]
+    out += term
+    np.multiply(points[:, 1], plane[1], out=term)
+    out += term
+    out += plane[3]
+    return out
 
 
 def heights_above(points: np.ndarray, plane: np.ndarray | None) -> np.ndarray:
