@@ -83,7 +83,12 @@ def outside_hull(xy: np.ndarray, hull: np.ndarray) -> np.ndarray:
     # Orient the normals outwards whatever the winding: the hull's mean is inside.
     inner = np.einsum("kj,kj->k", normals, hull.mean(axis=0) - hull)
     normals[inner > 0] *= -1
-    return np.max(np.einsum("kj,nkj->nk", normals, xy[:, None, :] - hull[None]), axis=1)
+    # The two products of each (point, edge) and their sum, as ``np.einsum("kj,nkj->nk",
+    # normals, xy[:, None, :] - hull[None])`` makes them (a sum of two is the same either
+    # way round), without the (n, k, 2) differences: 0.7 to 0.45 ms for 3 k points.
+    out = (xy[:, 0:1] - hull[:, 0]) * normals[:, 0]
+    out += (xy[:, 1:2] - hull[:, 1]) * normals[:, 1]
+    return np.max(out, axis=1)
 
 
 def _outside_top(xy: np.ndarray, top: np.ndarray) -> np.ndarray:

@@ -66,17 +66,17 @@ def attach_hidden_parts(
     h, w = np.asarray(frame.depth).shape[:2]
     u, v, z = _pixels(points, frame)
     inside = (labels >= 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
-    index = np.full((h, w), -1, dtype=np.int64)
-    index[v[inside], u[inside]] = np.flatnonzero(inside)
     idx = np.flatnonzero(inside)
+    # A one-pixel border of no point: a neighbour's flat index is the pixel's plus a
+    # constant, no bounds to test (as in :func:`outline_points`).
+    index = np.full((h + 2) * (w + 2), -1, dtype=np.int64)
+    at = (v[idx] + 1) * (w + 2) + (u[idx] + 1)
+    index[at] = idx
     pairs = []
     for du, dv in ((1, 0), (0, 1), (1, 1), (1, -1)):  # each unordered neighbour pair once
-        uu, vv = u[idx] + du, v[idx] + dv
-        ok = (uu >= 0) & (uu < w) & (vv >= 0) & (vv < h)
-        i = idx[ok]
-        j = index[vv[ok], uu[ok]]
+        j = np.take(index, at + (dv * (w + 2) + du))
         keep = j >= 0
-        i, j = i[keep], j[keep]
+        i, j = idx[keep], j[keep]
         keep = labels[i] != labels[j]
         pairs.append(np.stack([i[keep], j[keep]], axis=1))
     ij = np.concatenate(pairs)
@@ -241,29 +241,40 @@ def outline_points(
       A neighbour level with it (an object touching it) or without a reading (a hole of a
       noisy depth camera) is not in front of it.
     """
-    depth = np.asarray(frame.depth, dtype=np.float64)
+    depth = np.asarray(frame.depth)
     h, w = depth.shape[:2]
     u, v, z = _pixels(points, frame)
-    img = np.full((h, w), -2, dtype=np.int64)  # -2: no object point (table, robot, crop)
     ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
-    img[v[ok], u[ok]] = labels[ok]
+    # Images with a one-pixel border (label -3, no reading): a neighbour's flat index is
+    # the pixel's plus a constant, no bounds to test; 0.9 to 0.4 ms a decision.
+    img = np.full((h + 2, w + 2), -3, dtype=np.int64)
+    img[1:-1, 1:-1] = -2  # no object point (table, robot, crop)
+    pad = np.full((h + 2, w + 2), np.nan, dtype=np.float32)
+    pad[1:-1, 1:-1] = depth
+    i = np.flatnonzero(ok)
+    at = (v[i] + 1) * (w + 2) + (u[i] + 1)
+    img.reshape(-1)[at] = labels[i]
     cut = ~ok
     occluded = ~ok
+    lab, zi = labels[i], z[i]
+    ahead, beyond = zi + params.silhouette_step, zi - params.silhouette_step
+    c = np.zeros(len(i), dtype=bool)
+    o = np.zeros(len(i), dtype=bool)
     for du in (-1, 0, 1):
         for dv in (-1, 0, 1):
             if du == 0 and dv == 0:
                 continue
-            uu, vv = u + du, v + dv
-            inside = ok & (uu >= 0) & (uu < w) & (vv >= 0) & (vv < h)
-            cut |= ok & ~inside  # at the image's edge
-            occluded |= ok & ~inside
-            i = np.flatnonzero(inside)
-            d = depth[vv[i], uu[i]]
-            other = img[vv[i], uu[i]] != labels[i]
-            behind = np.isfinite(d) & (d > z[i] + params.silhouette_step)
-            cut[i] |= other & ~behind
-            nearer = np.isfinite(d) & (d > 0) & (d < z[i] - params.silhouette_step)
-            occluded[i] |= other & nearer
+            nb = at + (dv * (w + 2) + du)
+            other = np.take(img.reshape(-1), nb)
+            edge = other == -3  # the image's edge
+            other = other != lab
+            d = np.take(pad.reshape(-1), nb).astype(np.float64)
+            behind = np.isfinite(d) & (d > ahead)
+            c |= other & ~behind
+            nearer = np.isfinite(d) & (d > 0) & (d < beyond)
+            o |= (other & nearer) | edge
+    cut[i] |= c
+    occluded[i] |= o
     return cut, occluded
 
 
@@ -278,7 +289,8 @@ class Segmentation:
     planes: list[np.ndarray]
     """Support planes ``[a, b, c, d]`` found (the table first)."""
     table: tuple[np.ndarray, np.ndarray]
-    """The table's points (m, 3) [m] and colours (m, 3) uint8 (relative brightness)."""
+    """The table's points (m, 3) [m] and colours (m, 3) uint8 (relative brightness; none
+    with it off)."""
     labels: np.ndarray
     """Cluster of each point, shape (n,) int; -1 = noise."""
     cut: np.ndarray
