@@ -105,3 +105,44 @@ def test_simplifying_is_repeatable(soarm, tmp_path, monkeypatch) -> None:
 def test_a_model_of_small_meshes_is_drawn_as_it_is() -> None:
     model = load_scene("bench_pick").model()
     assert render_model(model) is model
+
+
+def _grid_mesh_mjcf(textured: bool) -> str:
+    """A 60 x 60 quad grid (7,200 triangles) with texture coordinates, drawn with a plain
+    material or a textured one."""
+    n = 61
+    u, v = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    verts = np.column_stack([0.1 * u.ravel(), 0.1 * v.ravel(), 0.01 * np.sin(6 * u.ravel())])
+    faces = []
+    for r in range(n - 1):
+        for c in range(n - 1):
+            a = r * n + c
+            faces += [(a, a + 1, a + n), (a + 1, a + n + 1, a + n)]
+    texcoord = np.column_stack([u.ravel(), v.ravel()])
+    text = " ".join
+    material = (
+        '<texture name="t" type="2d" builtin="checker" width="8" height="8"/>'
+        '<material name="m" texture="t"/>'
+        if textured
+        else '<material name="m" rgba="0.5 0.5 0.5 1"/>'
+    )
+    return f"""<mujoco><asset>{material}
+      <mesh name="grid" vertex="{text(f"{x:.5f}" for x in verts.ravel())}"
+            face="{text(str(i) for f in faces for i in f)}"
+            texcoord="{text(f"{x:.5f}" for x in texcoord.ravel())}"/>
+    </asset><worldbody><geom type="mesh" mesh="grid" material="m"/></worldbody></mujoco>"""
+
+
+@pytest.mark.parametrize("textured", [False, True])
+def test_texture_coordinates_no_texture_uses_do_not_keep_a_mesh_whole(textured: bool) -> None:
+    """A vendor's OBJ meshes carry texture coordinates that no texture of theirs uses
+    (robosuite's Panda: 50 of its 63 meshes); those are drawn simplified like any other.
+    A mesh a textured material covers keeps its surface, coordinates and all."""
+    model = mujoco.MjModel.from_xml_string(_grid_mesh_mjcf(textured))
+    assert model.mesh_facenum[0] > RENDER_FACES and model.mesh_texcoordadr[0] != -1
+    drawn = render_model(model)
+    if textured:
+        assert drawn is model
+    else:
+        assert drawn.mesh_facenum[0] <= RENDER_FACES and drawn.mesh_texcoordadr[0] == -1
+        mujoco.Renderer(drawn, 48, 64).close()  # the GL context takes the copy
