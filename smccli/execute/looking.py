@@ -26,11 +26,12 @@ from smccli.perception.distance import d_extents
 from smccli.world.sensors import CameraFrame, RobotGeometry
 
 LOOK_PERIOD = 1.0
-"""While an arm acts on an object, it looks at it again this often [s]; 0 = off. Each look
-costs the window of a camera frame that sees the table around the object and its
-clusters (:func:`look`: about 25 ms at 320x240 on a 2-core machine, 10 of them rendering,
-against 60 for a whole frame's); a push is caught if a look comes before the hand is
-within :data:`LOOK_NEAR` of the object."""
+"""While an arm acts on an object, it looks at it again this often [s]; 0 = off. A look
+that finds the object's pixels as they were perceives nothing
+(:mod:`~smccli.execute.tracking`: about 1 ms with an ideal camera); else it costs the
+window of a camera frame that sees the table around the object and its clusters
+(:func:`look`: about 12 ms at 320x240 on a 2-core machine). A push is caught if a look
+comes before the hand is within :data:`LOOK_NEAR` of the object."""
 LOOK_MARGIN = 0.05
 """A look's crop box reaches this far beyond where the object may have gone [m]: table
 around it for the plane fit and the brightness ring."""
