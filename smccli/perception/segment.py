@@ -11,26 +11,21 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-import open3d as o3d
 
 from smccli.perception.cloud import (
     heights_above,
     object_points_on_planes,
     support_plane,
 )
+from smccli.perception.dbscan import dbscan_labels
 from smccli.perception.params import PerceptionParams
 from smccli.world.sensors import CameraFrame, RobotGeometry
 
 
 def cluster_labels(points: np.ndarray, params: PerceptionParams) -> np.ndarray:
-    """DBSCAN labels (open3d), shape (n,) int; -1 = noise. Deterministic for a given input."""
-    if len(points) == 0:
-        return np.zeros(0, dtype=np.int64)
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    return np.asarray(
-        pcd.cluster_dbscan(eps=params.dbscan_eps, min_points=params.dbscan_min_points),
-        dtype=np.int64,
-    )
+    """DBSCAN labels, shape (n,) int; -1 = noise: open3d's ``cluster_dbscan``'s labels
+    (:func:`~smccli.perception.dbscan.dbscan_labels`). Deterministic for a given input."""
+    return dbscan_labels(points, params.dbscan_eps, params.dbscan_min_points)
 
 
 def _pixels(points: np.ndarray, frame: CameraFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

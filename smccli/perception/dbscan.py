@@ -1,0 +1,68 @@
+"""DBSCAN labels as open3d's ``PointCloud.cluster_dbscan`` gives them, to the label, in
+about half its time (ML perception's clustering, section 3.3).
+
+open3d searches each point's neighbours one query at a time and grows each cluster
+through hash sets; here the neighbour pairs come from one k-d tree query, the clusters from
+the graph of core points' pairs (scipy), and the numbering follows open3d's rules:
+
+- a point is *core* when it has at least ``min_points`` points, itself included, closer
+  than ``eps`` (strictly: open3d's radius search keeps ``d^2 < eps^2``);
+- clusters are numbered in the order of their lowest-index core point (open3d seeds a
+  cluster at the first unlabelled core point, in index order);
+- a point that is not core but lies within ``eps`` of core points takes the lowest
+  numbered of their clusters (the first cluster grown reaches it); any other is noise, -1.
+
+Measured on bench_pick's decision frames (3,300 points, eps 1.5 cm): 5.5 ms with open3d,
+about half here; ``tests/test_dbscan.py`` holds both to the same labels.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+
+def neighbour_pairs(points: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
+    """Index pairs ``(a, b)``, each (k,) int with a < b, of the points (n, 3) closer than
+    ``eps`` [m]: open3d's test ``dx^2 + dy^2 + dz^2 < eps^2`` on exactly its sums (the
+    k-d tree's own test is ``<=`` and its arithmetic may differ in the last bit, so it
+    is asked for a hair more and the pairs are tested again)."""
+    pairs = cKDTree(points).query_pairs(eps * (1 + 1e-9), output_type="ndarray")
+    a, b = pairs[:, 0], pairs[:, 1]
+    d = points[a] - points[b]
+    keep = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2] < eps * eps
+    return a[keep], b[keep]
+
+
+def dbscan_labels(points: np.ndarray, eps: float, min_points: int) -> np.ndarray:
+    """Cluster label per point (n,) int64, -1 for noise, of points (n, 3) float64 [m]."""
+    n = len(points)
+    labels = np.full(n, -1, dtype=np.int64)
+    if n == 0:
+        return labels
+    a, b = neighbour_pairs(np.asarray(points, dtype=np.float64), eps)
+    core = np.bincount(a, minlength=n) + np.bincount(b, minlength=n) + 1 >= min_points
+    cores = np.flatnonzero(core)
+    if len(cores) == 0:
+        return labels
+    both = core[a] & core[b]
+    graph = coo_matrix((np.ones(int(both.sum()), dtype=bool), (a[both], b[both])), shape=(n, n))
+    _, component = connected_components(graph, directed=False)
+    # Number the components holding core points by their lowest core index.
+    first = np.full(component.max() + 1, n)
+    np.minimum.at(first, component[cores], cores)
+    seeded = np.flatnonzero(first < n)
+    number = np.full(component.max() + 1, -1, dtype=np.int64)
+    number[seeded[np.argsort(first[seeded])]] = np.arange(len(seeded))
+    labels[cores] = number[component[cores]]
+    # Border points: the lowest number among the clusters of their core neighbours.
+    a_core, b_core = core[a] & ~core[b], ~core[a] & core[b]
+    border = np.concatenate([b[a_core], a[b_core]])
+    reached_from = np.concatenate([a[a_core], b[b_core]])
+    lowest = np.full(n, n, dtype=np.int64)
+    np.minimum.at(lowest, border, number[component[reached_from]])
+    reached = lowest < n
+    labels[reached] = lowest[reached]
+    return labels
