@@ -103,7 +103,7 @@ def _report(summaries: list[RecordSummary], scene: str, allow_failed: bool) -> N
     demonstration failed its task (without ``allow_failed``)."""
     from smccli.world.scene import load_scene
 
-    recorded_in = load_scene(scene)
+    recorded_in = summaries[-1].scene or load_scene(scene)
     for summary in summaries:
         _print_summary(summary, recorded_in, allow_failed)
     summary = summaries[-1]

@@ -11,6 +11,7 @@ import numpy as np
 
 from smccli.errors import LogError
 from smccli.logs.log import Log
+from smccli.world.compiled import compile_mjcf
 from smccli.world.robot_model import RobotModel, robot_body_ids
 from smccli.world.scene import ASSET_PREFIX
 from smccli.world.sensors import RobotGeometry
@@ -36,7 +37,7 @@ def robot_model_of(log: Log) -> RobotModel:
             for name, data in log.attachments.items()
             if name.startswith(ASSET_PREFIX)
         }  # the files the MJCF names (a vendor robot's meshes)
-        model = mujoco.MjModel.from_xml_string(text, assets or None)
+        model = compile_mjcf(text, assets)
     except ValueError as exc:  # MuJoCo's parse and compile errors
         raise LogError(f"{where}: MuJoCo rejects the MJCF ({' '.join(str(exc).split())})") from None
     names = tuple(log.joint_states[0].names) if log.joint_states else ()

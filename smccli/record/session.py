@@ -101,6 +101,8 @@ class RecordSummary:
     """Why the recording stopped early (``SIGINT``, ``SIGTERM``), or None if it finished."""
     task: dict | None = None
     """The log's task verdict (``smc_end``): ``{success, reason, criteria}``."""
+    scene: Scene | None = None
+    """The scene recorded in."""
 
     @property
     def failed_task(self) -> bool:
@@ -191,7 +193,7 @@ def record_episodes(
             )
             if summary is None:  # discarded: record it again
                 continue
-            summaries.append(summary)
+            summaries.append(replace(summary, scene=scene))
             if _episode_kept(summary, i, cfg, keyboard, say):
                 break
             i += 1

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from smccli.world.compiled import compile_mjcf
 from smccli.world.sensors import RobotGeometry
 
 MARGIN = 0.012
@@ -110,7 +111,7 @@ class RobotModel:
     ) -> RobotModel:
         """Build from a self-contained MJCF (as attached to every log) and the files it
         names (``Scene.assets``; a vendor robot's meshes)."""
-        model = mujoco.MjModel.from_xml_string(mjcf_xml, assets or None)
+        model = compile_mjcf(mjcf_xml, assets)
         return cls(model, mujoco.MjData(model), joint_names, robot_body_ids(model, joint_names))
 
     def geometry_for(self, positions: np.ndarray) -> RobotGeometry:

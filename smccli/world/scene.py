@@ -22,6 +22,7 @@ from xml.sax.saxutils import quoteattr
 import mujoco
 
 from smccli.errors import LogError, SceneError
+from smccli.world.compiled import compile_mjcf
 from smccli.world.criteria import GROUPS, RELATIONS, Condition, Group, SuccessCriterion
 from smccli.world.objects import add_object
 from smccli.world.robot import (
@@ -196,7 +197,7 @@ def load_scene_from_text(
     try:
         raw = read_scene_yaml(yaml_text, at_yaml)
         try:
-            model = mujoco.MjModel.from_xml_string(mjcf_text, dict(assets or {}) or None)
+            model = compile_mjcf(mjcf_text, assets)
         except ValueError as exc:
             raise SceneError(
                 f"{at_xml}: MuJoCo rejects the MJCF ({' '.join(str(exc).split())})"
@@ -279,7 +280,7 @@ def _build(
         raise SceneError(f"{where}: model does not compile: {exc}") from exc
     mjcf = spec.to_xml()
     assets = asset_files(spec) if robot.composition is not None else {}
-    model = mujoco.MjModel.from_xml_string(mjcf, assets or None)
+    model = compile_mjcf(mjcf, assets)
     scene = scene_from_file(raw, yaml_text, mjcf, where, robot, model)
     return replace(scene, assets=tuple(sorted(assets.items())))
 

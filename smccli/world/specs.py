@@ -7,7 +7,6 @@ An object's pose is that of its bounding-box centre: ``(x, y, z, yaw)`` [m, m, m
 
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,6 +14,7 @@ from pathlib import Path
 import mujoco
 
 from smccli.errors import SceneError
+from smccli.world.compiled import compile_mjcf
 from smccli.world.criteria import SuccessCriterion
 from smccli.world.noise import IDEAL, SensorNoise
 from smccli.world.robot import Robot
@@ -30,12 +30,6 @@ HIDDEN_GROUP = 5
 parked objects (the viewer still shows it). Scene and robot files may not use it."""
 ROBOT_KEY = "robot"
 """The layout key of a mobile base's start pose (no object may have this name)."""
-
-
-_COMPILED: dict[tuple[str, tuple[tuple[str, bytes], ...]], mujoco.MjModel] = {}
-"""Models compiled in this process, by MJCF text and asset files (:meth:`Scene.model`): a
-vendor robot's meshes take 0.15 s to compile and 0.03 s to copy, which every trial paid
-again (its sensors' model)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -227,16 +221,9 @@ class Scene:
         raise SceneError(f"scene {self.name}: no object {name!r} (objects: {valid})")
 
     def model(self) -> mujoco.MjModel:
-        """The MJCF compiled into a fresh model: a copy of the one this process compiled
-        from the same text and files (:data:`_COMPILED`)."""
-        key = (self.mjcf, self.assets)
-        compiled = _COMPILED.get(key)
-        if compiled is None:
-            try:
-                compiled = mujoco.MjModel.from_xml_string(self.mjcf, dict(self.assets) or None)
-            except ValueError as exc:
-                raise SceneError(f"scene {self.name}: MJCF does not compile: {exc}") from exc
-            if len(_COMPILED) >= 4:  # a few scenes per process; never grows without bound
-                _COMPILED.clear()
-            _COMPILED[key] = compiled
-        return copy.copy(compiled)
+        """The MJCF compiled into a fresh model (:func:`~smccli.world.compiled.compile_mjcf`:
+        a copy of the one this process compiled from the same text and files)."""
+        try:
+            return compile_mjcf(self.mjcf, dict(self.assets))
+        except ValueError as exc:
+            raise SceneError(f"scene {self.name}: MJCF does not compile: {exc}") from exc
