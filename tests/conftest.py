@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from zygote import Zygote
+from zygote import Command, Zygote
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -39,6 +39,19 @@ def smc(
     """Run the real ``smc`` command (``python -m smccli.cli ARGS``) in a process of its own,
     forked from one that has already imported smc (:mod:`zygote`)."""
     return _ZYGOTE.run([str(a) for a in args], Path(cwd), timeout)
+
+
+def smc_start(
+    *args: str | Path,
+    out: Path,
+    err: Path | None = None,
+    env: dict[str, str] | None = None,
+    cwd: Path = REPO,
+) -> Command:
+    """The real ``smc`` command started beside the test (a robot, the node that drives it),
+    forked from the zygote with ``env`` (default: the suite's), writing to ``out`` and
+    ``err`` (default: ``out`` too): a ``Popen``-like :class:`zygote.Command`."""
+    return _ZYGOTE.start([str(a) for a in args], Path(cwd), Path(out), Path(err or out), env)
 
 
 def smc_process(

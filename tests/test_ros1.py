@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import sample_log_paths
+from conftest import sample_log_paths, smc_start
+from zygote import Command
 
 from smccli.ros.master import roscore
 from smccli.ros.node import EXIT_CODES
@@ -98,10 +99,6 @@ def trees(tmp_path_factory) -> dict[str, Path]:
     return out
 
 
-def _smc(*args: str) -> list[str]:
-    return [sys.executable, "-m", "smccli.cli", *args]
-
-
 def _map(path: Path, scene: str, **edits: object) -> Path:
     """The sim's topic map of ``scene``, with ``edits`` (dotted keys) changed."""
     from smccli.ros.sim_robot import sim_topic_map
@@ -124,22 +121,19 @@ class Robot:
     def __init__(self, env: dict[str, str], tmp: Path, scene: str, *args: str) -> None:
         self.report = tmp / f"sim_{scene}.json"
         self.log = tmp / f"sim_{scene}.log"
-        with open(self.log, "w") as log:
-            self.proc = subprocess.Popen(
-                _smc(
-                    "sim",
-                    "--ros1",
-                    "--scene",
-                    scene,
-                    "--report",
-                    str(self.report),
-                    "--force",
-                    *args,
-                ),
-                env=env,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-            )
+        self.log.write_text("")  # read below before the command may have opened it
+        self.proc = smc_start(
+            "sim",
+            "--ros1",
+            "--scene",
+            scene,
+            "--report",
+            self.report,
+            "--force",
+            *args,
+            out=self.log,
+            env=env,
+        )
         deadline = time.monotonic() + 120
         while "running" not in self.log.read_text():  # it says so once it publishes
             assert self.proc.poll() is None and time.monotonic() < deadline, self.log.read_text()
@@ -178,13 +172,19 @@ class Monitor:
         self.proc.wait(timeout=20)
 
 
-def _run(env: dict[str, str], tree: Path, topics: Path, report: Path) -> subprocess.Popen:
-    return subprocess.Popen(
-        _smc("run", str(tree), "--ros1", "--topics", str(topics), "--report", str(report)),
+def _run(env: dict[str, str], tree: Path, topics: Path, report: Path) -> Command:
+    out = report.with_name(report.stem + ".out")
+    return smc_start(
+        "run",
+        tree,
+        "--ros1",
+        "--topics",
+        topics,
+        "--report",
+        report,
+        out=out,
+        err=out.with_suffix(".err"),
         env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
     )
 
 
@@ -243,7 +243,7 @@ def test_tree_runs_the_robot_as_replay(ros_env, trees, tmp_path, scene, seeds, e
         assert len(ros["image_to_command_ms"]) == len(ros["decisions"])
 
 
-def _stopped(monitor: Monitor, node: subprocess.Popen, robot: Robot, stop: str) -> str:
+def _stopped(monitor: Monitor, node: Command, robot: Robot, stop: str) -> str:
     """The node ended with ``stop``: its exit code, the reason printed and published, and
     no command after it (the robot stepped once per command the node counted)."""
     out, err = node.communicate(timeout=120)
