@@ -24,6 +24,7 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+from conftest import smc_start  # noqa: E402
 from rerun.chunk import RrdReader  # noqa: E402
 
 from smccli.errors import LogError, SmcError, TreeError  # noqa: E402
@@ -474,12 +475,14 @@ def _bad_inputs(tmp: Path, good_tree: Path, good_log: Path) -> dict[str, tuple[l
 
 def test_bad_tree_or_log_is_one_line_and_exit_code_2(inputs, tmp_path):
     cases = _bad_inputs(tmp_path, inputs.tree, inputs.demos[0])
-    procs = {
-        name: subprocess.Popen(
-            [PY, "-m", "smccli.cli", "inspect", *args, "--save", str(tmp_path / f"{i}.rrd")],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
+    procs = {  # side by side
+        name: smc_start(
+            "inspect",
+            *args,
+            "--save",
+            tmp_path / f"{i}.rrd",
+            out=tmp_path / f"{i}.out",
+            err=tmp_path / f"{i}.err",
             env={**os.environ, "COLUMNS": "400"},
         )
         for i, (name, (args, _)) in enumerate(cases.items())
