@@ -49,3 +49,18 @@ def test_a_rejected_text_raises_and_a_missing_file_too(tmp_path: Path) -> None:
             continue
         raise AssertionError(f"{xml} compiled")
     assert isinstance(compile_mjcf("<mujoco/>"), mujoco.MjModel)
+
+
+def test_a_file_on_disk_and_the_same_bytes_handed_over_compile_once(tmp_path, monkeypatch) -> None:
+    """A tree's copy of a scene names its meshes on disk, the scene file hands their bytes
+    over: one compile serves both."""
+    mesh = tmp_path / "once.obj"
+    mesh.write_text(CUBE.replace("v 1 0 0", "v 1.5 0 0"))
+    calls = []
+    compile_xml = mujoco.MjModel.from_xml_string
+    monkeypatch.setattr(
+        mujoco.MjModel, "from_xml_string", lambda *a: calls.append(1) or compile_xml(*a)
+    )
+    a = compile_mjcf(_xml(str(mesh)))
+    b = compile_mjcf(_xml(str(mesh)), {str(mesh): mesh.read_bytes()})
+    assert len(calls) == 1 and a.body_mass[1] == b.body_mass[1]

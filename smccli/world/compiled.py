@@ -1,55 +1,56 @@
 """MJCF text compiled once per process: every caller gets a copy of the same model.
 
 One command compiles the same scene text several times over (the scene file loaded, the
-log's copy of it rebuilt, the robot model of the self-filter, the simulator's): a vendor
-robot's meshes take 0.2-0.6 s each time. A model depends on its text, the files handed
-with it (``assets``) and the files on disk it names (a tree's copy of a vendor scene names
-its meshes by path): the key holds the first two and the size and modification time of
-the others.
+tree's or the log's copy of it rebuilt, the robot model of the self-filter, the
+simulator's): a vendor robot's meshes take 0.2-0.6 s each time. A model depends on its
+text and the bytes of the files it names, whether they are handed with it (``assets``: a
+scene's meshes) or read from disk (a tree's copy of a vendor scene names them by path):
+the key holds the text and each file's name and SHA-256, so the two ways give one model.
 """
 
 from __future__ import annotations
 
 import copy
-import os
+import hashlib
 import re
 from collections.abc import Mapping
+from pathlib import Path
 
 import mujoco
 
 _MODELS: dict[tuple, mujoco.MjModel] = {}
-"""(MJCF text, its files, the named files' stats on disk) -> the model compiled."""
+"""(MJCF text, (file name, SHA-256) sorted) -> the model compiled."""
 
 _NAMED_FILE = re.compile(r'\bfile\w*="([^"]*)"')
 """An MJCF attribute naming a file: ``file``, a cube texture's ``fileright`` and so on."""
 
 
-def _on_disk(xml: str, assets: Mapping[str, bytes]) -> tuple | None:
-    """(path, size, mtime) of each file the text names that ``assets`` does not hold,
-    with the working folder relative paths resolve from; None when one cannot be read
-    (MuJoCo then says what is wrong)."""
-    named = sorted({f for f in _NAMED_FILE.findall(xml) if f not in assets})
-    if not named:
-        return ()
-    try:
-        stats = [(f, os.stat(f).st_size, os.stat(f).st_mtime_ns) for f in named]
-    except OSError:
-        return None
-    return (os.getcwd(), *stats)
+def _files(xml: str, assets: Mapping[str, bytes]) -> dict[str, bytes] | None:
+    """``assets`` with every other file the text names read from disk (by its absolute
+    path); None when one is not an absolute path that can be read (MuJoCo then resolves it
+    or says what is wrong)."""
+    files = dict(assets)
+    for name in set(_NAMED_FILE.findall(xml)) - files.keys():
+        try:
+            if not Path(name).is_absolute():
+                return None
+            files[name] = Path(name).read_bytes()
+        except OSError:
+            return None
+    return files
 
 
 def compile_mjcf(xml: str, assets: Mapping[str, bytes] | None = None) -> mujoco.MjModel:
     """``mujoco.MjModel.from_xml_string(xml, assets)``, as a fresh copy of the model this
-    process compiled from the same text and files; MuJoCo's ValueError where it rejects
-    them (nothing is remembered then)."""
-    files = tuple(sorted((assets or {}).items()))
-    disk = _on_disk(xml, dict(files))
-    if disk is None:
-        return mujoco.MjModel.from_xml_string(xml, dict(files) or None)
-    key = (xml, files, disk)
+    process compiled from the same text and file contents; MuJoCo's ValueError where it
+    rejects them (nothing is remembered then)."""
+    files = _files(xml, assets or {})
+    if files is None:
+        return mujoco.MjModel.from_xml_string(xml, dict(assets or {}) or None)
+    key = (xml, tuple(sorted((k, hashlib.sha256(v).digest()) for k, v in files.items())))
     model = _MODELS.get(key)
     if model is None:
-        model = mujoco.MjModel.from_xml_string(xml, dict(files) or None)
+        model = mujoco.MjModel.from_xml_string(xml, files or None)
         if len(_MODELS) >= 4:  # a few scenes per process; never grows without bound
             _MODELS.clear()
         _MODELS[key] = model
