@@ -108,6 +108,7 @@ class Zygote:
                 )
                 assert self.proc.stdout is not None
                 assert json.loads(self.proc.stdout.readline()) == {"ready": True}
+                self._replies.pop(-1, None)  # an earlier zygote's end
                 threading.Thread(target=self._read, args=(self.proc,), daemon=True).start()
             return self.proc
 
