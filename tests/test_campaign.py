@@ -41,6 +41,17 @@ def test_wilson_interval():
     assert lo == pytest.approx(0.7225, abs=1e-4) and hi == 1.0
 
 
+def test_wilson_interval_is_scipys_to_the_bit():
+    from scipy.stats import binomtest
+
+    for n in (*range(1, 60), 100, 299, 300, 500, 1288):
+        for k in range(n + 1):
+            ci = binomtest(k, n).proportion_ci(confidence_level=0.95, method="wilson")
+            assert cp.wilson(k, n) == (float(ci.low), float(ci.high)), (k, n)
+    ci = binomtest(7, 9).proportion_ci(confidence_level=0.9, method="wilson")
+    assert cp.wilson(7, 9, 0.9) == (float(ci.low), float(ci.high))
+
+
 def test_same_seed_same_results_with_1_and_2_workers_and_on_a_dask_cluster(trees):
     tree, scene = resolve(trees["bench_pick"], None)
     one = cp.run_trials(tree, scene, trials=4, seed=3, workers=1)

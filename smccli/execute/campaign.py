@@ -54,14 +54,22 @@ FAILURES = tuple(o for o in OUTCOMES if o != "success")
 
 
 def wilson(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
-    """Wilson score interval (lo, hi) of a binomial proportion; (0, 1) when n = 0."""
+    """Wilson score interval (lo, hi) of a binomial proportion, without continuity
+    correction (Newcombe 1998); (0, 1) when n = 0. The arithmetic of scipy's
+    ``binomtest(k, n).proportion_ci(method="wilson")`` to the bit, written out because
+    importing scipy.stats costs a campaign 0.9 s of CPU, more than a trial."""
     if n <= 0:
         return 0.0, 1.0  # no trial: the rate may be anything (scipy refuses n = 0)
-    # scipy.stats takes 0.9 s to import: only a campaign's summary needs it.
-    from scipy.stats import binomtest
+    from scipy.special import ndtri  # imported with scipy.spatial already
 
-    ci = binomtest(successes, n).proportion_ci(confidence_level=confidence, method="wilson")
-    return float(ci.low), float(ci.high)
+    p = successes / n
+    z = ndtri(0.5 + 0.5 * confidence)
+    denom = 2 * (n + z**2)
+    center = (2 * n * p + z**2) / denom
+    delta = z / denom * math.sqrt(4 * n * p * (1 - p) + z**2)
+    lo = 0.0 if successes == 0 else center - delta
+    hi = 1.0 if successes == n else center + delta
+    return float(lo), float(hi)
 
 
 @dataclass(frozen=True, slots=True)
