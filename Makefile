@@ -56,8 +56,12 @@ system-deps:
 
 # One test process per core; a file's tests stay together (module fixtures built once),
 # the costly files first (tests/durations.json, tests/conftest.py; not xdist's reorder).
+# The plugins are named, not found by entry point: pytest rewrites the asserts of every
+# module of a package that ships one (dash's 196, imported by open3d), 2 s of CPU in each
+# worker, again at every run where PYTHONDONTWRITEBYTECODE keeps pytest from caching them.
 TEST_WORKERS ?= $(shell nproc)
-PYTEST := $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
+PYTEST := PYTEST_DISABLE_PLUGIN_AUTOLOAD=1 $(PY) -m pytest -p xdist.plugin -p pytest_timeout \
+  -p _hypothesis_pytestplugin -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
 
 # CI=true: `make models` ran, so a test needing the vendors' models fails instead of
 # skipping (tests/conftest.py, vendor_models) should they still be missing.
