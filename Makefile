@@ -54,12 +54,15 @@ system-deps:
 	  fi; \
 	fi
 
-# One test process per core; a file's tests stay together (module fixtures built once),
-# the costly files first (tests/durations.json, tests/conftest.py; not xdist's reorder).
+# One test process per core and one more: the first two minutes (guides, vendor models)
+# leave a core 15-20 % idle with two (vmstat), and ROS 1, Xvfb and Chromium wait in real
+# time (9:55 against 10:24-10:28 for pytest, docs/testing.md). A file's tests stay together
+# (module fixtures built once), the costly files first (tests/durations.json,
+# tests/conftest.py; not xdist's reorder).
 # The plugins are named, not found by entry point: pytest rewrites the asserts of every
 # module of a package that ships one (dash's 196, imported by open3d), 2 s of CPU in each
 # worker, again at every run where PYTHONDONTWRITEBYTECODE keeps pytest from caching them.
-TEST_WORKERS ?= $(shell nproc)
+TEST_WORKERS ?= $(shell echo $$(($$(nproc) + 1)))
 PYTEST := PYTEST_DISABLE_PLUGIN_AUTOLOAD=1 $(PY) -m pytest -p xdist.plugin -p pytest_timeout \
   -p _hypothesis_pytestplugin -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
 

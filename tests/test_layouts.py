@@ -5,7 +5,6 @@ here starts from its own random layout (``smc record --randomize --seed N``)."""
 from __future__ import annotations
 
 import itertools
-import multiprocessing as mp
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -19,6 +18,7 @@ from smccli.learn.compile import compile_logs
 from smccli.learn.tree import ROOT, Tree, load_tree
 from smccli.logs import read_log
 from smccli.record.session import RecordConfig, record
+from smccli.workers import clean_context
 
 pytestmark = pytest.mark.slow
 
@@ -46,7 +46,8 @@ def _configs(root: Path, scene: str, script: str, seeds: range) -> list[RecordCo
 @pytest.fixture(scope="module")
 def demos(tmp_path_factory) -> dict[str, list[Path]]:
     """22 demonstrations, each from its own random layout, recorded on two processes (the
-    recordings are independent; spawn: EGL contexts do not survive fork)."""
+    recordings are independent; forked from a server that has only imported smc: EGL
+    contexts do not survive fork)."""
     root = tmp_path_factory.mktemp("layouts")
     groups = {
         "bench_pick": _configs(root, "bench_pick", "demo.yaml", range(1, N_BENCH + 1)),
@@ -55,7 +56,7 @@ def demos(tmp_path_factory) -> dict[str, list[Path]]:
         "cube": _configs(root, "pick_place", "demo1.yaml", range(1, 4)),
         "pyramid": _configs(root, "pick_place", "demo2.yaml", range(1, 4)),
     }
-    with ProcessPoolExecutor(2, mp_context=mp.get_context("spawn")) as pool:
+    with ProcessPoolExecutor(2, mp_context=clean_context(["smccli.record.session"])) as pool:
         for summary in pool.map(record, [c for cfgs in groups.values() for c in cfgs]):
             assert not summary.interrupted
     return {k: [Path(c.output) for c in cfgs] for k, cfgs in groups.items()}
