@@ -8,6 +8,10 @@ PY := $(VENV)/bin/python
 SMC := $(VENV)/bin/smc
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
+# Python writes the bytecode of what it imports (.venv, smccli, tests; git ignores it),
+# here too where the environment says not to: otherwise every process compiles its
+# imports again (1.5 to 3.4 s of CPU to import smc's commands).
+unexport PYTHONDONTWRITEBYTECODE
 # Debian packages: libusb for open3d, Mesa EGL for headless rendering, Xvfb + xdotool +
 # GLFW for the viewer test, Chromium for the web viewer test (Playwright drives it; it
 # downloads no browser of its own); ROS 1 (roscore, rospy and the messages) for `smc run
@@ -21,11 +25,12 @@ DEB_PKGS := libusb-1.0-0 libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri libglfw3 xv
 $(VENV)/.installed: pyproject.toml
 	@$(MAKE) --no-print-directory system-deps
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	@# uv resolves and installs what pip would, from its cache: about 30 s against pip's 50
-	@# on a fresh clone. Bytecode compiled as pip does: where PYTHONDONTWRITEBYTECODE is
-	@# set, every process would otherwise compile its imports again (1.4 s of CPU each).
-	$(PY) -m pip install -q uv && $(VENV)/bin/uv pip install --python $(PY) -q --compile-bytecode \
-	  -e '.[dev]' || { $(PY) -m pip install -q --upgrade pip && $(PY) -m pip install -q -e '.[dev]'; }
+	@# uv resolves and installs what pip would, from its cache, in a few seconds against
+	@# pip's 50. No bytecode compiled up front (25 s for every module of every package):
+	@# the first process to import a module writes its bytecode (PYTHONDONTWRITEBYTECODE is
+	@# not passed on: see the top).
+	$(PY) -m pip install -q uv && $(VENV)/bin/uv pip install --python $(PY) -q -e '.[dev]' \
+	  || { $(PY) -m pip install -q --upgrade pip && $(PY) -m pip install -q -e '.[dev]'; }
 	touch $@
 
 setup: $(VENV)/.installed
