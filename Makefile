@@ -66,7 +66,7 @@ system-deps:
 # tests/conftest.py; not xdist's reorder).
 # The plugins are named, not found by entry point: pytest rewrites the asserts of every
 # module of a package that ships one (dash's 196, imported by open3d), 2 s of CPU in each
-# worker, again at every run where PYTHONDONTWRITEBYTECODE keeps pytest from caching them.
+# worker (a fresh clone has none of them cached).
 TEST_WORKERS ?= $(shell echo $$(($$(nproc) + 1)))
 PYTEST := PYTEST_DISABLE_PLUGIN_AUTOLOAD=1 $(PY) -m pytest -p xdist.plugin -p pytest_timeout \
   -p _hypothesis_pytestplugin -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
