@@ -286,3 +286,29 @@ def test_a_noisy_region_is_the_whole_noisy_frame_there_to_the_bit() -> None:
     assert not part.depth[~inside].any() and not part.rgb[~inside].any()
     assert np.array_equal(after_part.rgb, after.rgb)
     assert np.array_equal(after_part.depth, after.depth)
+
+
+def test_a_frame_read_late_holds_the_instant_it_was_drawn_to_the_bit() -> None:
+    """A whole frame's colours are drawn after its depth and read at their first use
+    (DrawingFrame): read after the world moved and the camera drew again (a whole frame
+    and a window), they are still the instant's, to the bit of mujoco.Renderer's lit
+    pass then."""
+    sim = Sim(load_scene("pick_place"))
+    renderer = mujoco.Renderer(sim.model, sim.scene.camera.height, sim.scene.camera.width)
+    renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
+    renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
+    option = sim._camera._option()
+    early, expected = [], []
+    for _ in range(3):
+        renderer.update_scene(sim.data, camera=sim._camera.cam_id, scene_option=option)
+        expected.append(renderer.render().copy())
+        early.append(sim.render_camera())
+        for _ in range(40):  # the arm moves into view and out of its home pose
+            sim.step(PoiCommand(sim.t, sim.poi() + [0.004, -0.003, -0.004, 0.01], 0.2))
+    sim.render_camera((60, 150, 100, 220))
+    later = sim.render_camera()
+    for frame, rgb in zip(early, expected, strict=True):
+        assert np.array_equal(frame.rgb, rgb)
+    assert not np.array_equal(later.rgb, expected[-1])
+    renderer.close()
+    sim.close()

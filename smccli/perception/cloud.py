@@ -46,7 +46,13 @@ def points_from_depth(
     ``max_depth``) are dropped; with ``region`` ``(v0, v1, u0, u1)`` so are the pixels
     outside rows ``v0:v1`` and columns ``u0:u1`` (:func:`crop_region`).
     """
-    return _lift(frame, max_depth, region)
+    points, pixels = _lift(frame, max_depth, region)
+    return points, pixel_colours(frame, pixels)
+
+
+def pixel_colours(frame: CameraFrame, pixels: np.ndarray) -> np.ndarray:
+    """The colours (n, 3) uint8 of ``frame``'s pixels at row-major indices ``pixels`` (n,)."""
+    return np.take(np.asarray(frame.rgb).reshape(-1, 3), pixels, axis=0)
 
 
 def _lift(
@@ -55,9 +61,13 @@ def _lift(
     region: tuple[int, int, int, int] | None,
     box: tuple[tuple[float, ...], tuple[float, ...]] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`points_from_depth`; with ``box`` (lo, hi), each (3,) [m] in the world frame,
-    only the points inside it (:func:`crop_mask`'s test, on the same values): the crop
-    made on the coordinates' columns before they are interleaved."""
+    """:func:`points_from_depth` with each point's row-major pixel index (n,) int64 in
+    place of its colour: the depth alone is read, and the colours of the points kept at
+    the end are gathered then (:func:`pixel_colours`; a frame's colours may still be
+    drawing, :class:`~smccli.world.sensors.DrawingFrame`). With ``box`` (lo, hi), each
+    (3,) [m] in the world frame, only the points inside it (:func:`crop_mask`'s test, on
+    the same values): the crop made on the coordinates' columns before they are
+    interleaved."""
     depth = np.asarray(frame.depth, dtype=np.float32)
     h, w = depth.shape
     K = np.asarray(frame.K, dtype=np.float64)
@@ -71,7 +81,6 @@ def _lift(
     idx = np.flatnonzero(valid)
     n = len(idx)
     x_n, y_n = _rays(K, h, w)
-    rgb = np.asarray(frame.rgb).reshape(-1, 3)
     # Vectors written in place: fresh (n,) and (n, 3) arrays (1.8 MB for 320 x 240) cost
     # more than the arithmetic on this machine, in page faults.
     z, x, y, term = _scratch("lift", (4, n))
@@ -102,14 +111,13 @@ def _lift(
         acc += term
         acc += T[i, 3]
     if box is None:
-        return np.ascontiguousarray(world.T), rgb.copy() if every else np.take(rgb, idx, axis=0)
+        return np.ascontiguousarray(world.T), idx
     lo, hi = box
     keep = _in_box(world, lo, hi)
     points = np.empty((int(np.count_nonzero(keep)), 3))
     for i in range(3):
         points[:, i] = np.compress(keep, world[i])
-    colors = np.compress(keep, rgb, axis=0) if every else np.take(rgb, idx[keep], axis=0)
-    return points, colors
+    return points, np.flatnonzero(keep) if every else np.compress(keep, idx)
 
 
 _SCRATCH = threading.local()
@@ -422,7 +430,8 @@ def above_plane_mask(points: np.ndarray, plane: np.ndarray, margin: float) -> np
 def voxel_downsample(
     points: np.ndarray, colors: np.ndarray, voxel: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Keep the first point of each occupied voxel (deterministic, order-preserving)."""
+    """Keep the first point of each occupied voxel (deterministic, order-preserving), and
+    its row of ``colors`` (colours, or pixel indices)."""
     if voxel <= 0 or len(points) == 0:
         return points, colors
     keys = np.floor(points / voxel).astype(np.int64)
@@ -436,7 +445,8 @@ def remove_planes(
 ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """Remove the big planes of any orientation (``params.remove_walls``): door panels,
     cabinet sides, shelves and tops, one RANSAC plane at a time while one holds at least
-    ``wall_min_points`` points. Returns (points, colours, the near-horizontal planes, each
+    ``wall_min_points`` points. Returns (points, colours (or whatever rows ``colors``
+    holds: pixel indices), the near-horizontal planes, each
     ``[a, b, c, d]`` with its normal up): a cluster stands on the one just below it, if
     any (:func:`support_plane`)."""
     horizontal: list[np.ndarray] = []
@@ -501,16 +511,35 @@ def object_points_on_planes(
     points (m, 3) [m] and colours (m, 3) uint8, the reference of
     :mod:`smccli.perception.brightness` (none with ``remove_walls``: shelves differ; nor
     with ``brightness_scale`` 0, the brightness off: nothing reads them)."""
+    points, pixels, planes, (table, table_pixels) = object_pixels_on_planes(
+        frame, robot, params, base
+    )
+    return (
+        points,
+        pixel_colours(frame, pixels),
+        planes,
+        (table, pixel_colours(frame, table_pixels)),
+    )
+
+
+def object_pixels_on_planes(
+    frame: CameraFrame,
+    robot: RobotGeometry | None,
+    params: PerceptionParams,
+    base: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """:func:`object_points_on_planes` from the depth alone: each point's row-major pixel
+    index (n,) int64 (the table's (m,)) in place of its colour (:func:`pixel_colours`)."""
     region = crop_region(frame, params, base)
     if params.crop_frame == "base":
-        points, colors = _lift(frame, params.max_depth, region)
-        points, colors = _kept(crop_mask(points, params, base), points, colors)
+        points, pixels = _lift(frame, params.max_depth, region)
+        points, pixels = _kept(crop_mask(points, params, base), points, pixels)
     else:  # the crop made in the lift: 0.5 ms less than on the lifted (n, 3) points
-        points, colors = _lift(frame, params.max_depth, region, (params.crop_min, params.crop_max))
-    points, colors = voxel_downsample(points, colors, params.voxel_size)
-    table = (np.zeros((0, 3)), np.zeros((0, 3), dtype=np.uint8))
+        points, pixels = _lift(frame, params.max_depth, region, (params.crop_min, params.crop_max))
+    points, pixels = voxel_downsample(points, pixels, params.voxel_size)
+    table = (np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
     if params.remove_walls:
-        points, colors, planes = remove_planes(points, colors, params)
+        points, pixels, planes = remove_planes(points, pixels, params)
     else:
         pose = np.asarray(frame.T_world_camera, dtype=np.float64).tobytes()
         plane, height = _table_plane(points, params, _TABLES.get(pose))
@@ -521,28 +550,27 @@ def object_points_on_planes(
         planes = [] if plane is None else [plane]
         if plane is not None and height is not None:
             if params.brightness_scale > 0:  # the table is the brightness's reference alone
-                table = _kept(np.abs(height) < params.plane_distance, points, colors)
+                table = _kept(np.abs(height) < params.plane_distance, points, pixels)
             # above_plane_mask, its distances reused
-            points, colors = _kept(height > params.plane_distance, points, colors)
+            points, pixels = _kept(height > params.plane_distance, points, pixels)
     if params.outlier_neighbours > 0 and len(points):
         pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
         _, kept = pcd.remove_radius_outlier(
             nb_points=params.outlier_neighbours, radius=params.outlier_radius
         )
         idx = np.asarray(kept, dtype=int)
-        points, colors = points[idx], colors[idx]
+        points, pixels = points[idx], pixels[idx]
     # Self-filter last: the table is most of the cloud, so this tests far fewer points
     # against the robot's spheres; the robot's few points do not sway the RANSAC plane.
-    points, colors = _kept(self_filter_mask(points, robot), points, colors)
-    return points, colors, planes, table
+    points, pixels = _kept(self_filter_mask(points, robot), points, pixels)
+    return points, pixels, planes, table
 
 
-def _kept(
-    mask: np.ndarray, points: np.ndarray, colors: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """The rows of ``points`` (n, 3) and ``colors`` (n, 3) where ``mask`` (n,) holds:
-    ``np.compress``, a quarter of boolean indexing's time on (n, 3) arrays."""
-    return np.compress(mask, points, axis=0), np.compress(mask, colors, axis=0)
+def _kept(mask: np.ndarray, points: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of ``points`` (n, 3) and of ``rows`` (n, ...: colours, pixel indices)
+    where ``mask`` (n,) holds: ``np.compress``, a quarter of boolean indexing's time on
+    (n, 3) arrays."""
+    return np.compress(mask, points, axis=0), np.compress(mask, rows, axis=0)
 
 
 def cloud_from_frame(

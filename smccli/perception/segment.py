@@ -14,7 +14,8 @@ import numpy as np
 
 from smccli.perception.cloud import (
     heights_above,
-    object_points_on_planes,
+    object_pixels_on_planes,
+    pixel_colours,
     support_plane,
 )
 from smccli.perception.dbscan import dbscan_labels
@@ -303,8 +304,13 @@ def segment_frame(
     """depth -> world points -> crop -> self-filter (``robot``'s spheres) -> table plane
     removal (RANSAC) -> DBSCAN -> hidden parts joined to the cluster hiding them -> parts
     split by depth holes joined (:func:`join_split_parts`) -> outlines."""
-    points, colors, planes, table = object_points_on_planes(frame, robot, params, base)
+    points, pixels, planes, (table, table_pixels) = object_pixels_on_planes(
+        frame, robot, params, base
+    )
     labels = attach_hidden_parts(points, cluster_labels(points, params), frame, params)
     labels = join_split_parts(points, labels, planes, params)
     cut, occluded = outline_points(points, labels, frame, params)
-    return Segmentation(points, colors, planes, table, labels, cut, occluded)
+    # The colours last: a simulated camera's may still be drawing until here (DrawingFrame).
+    colors = pixel_colours(frame, pixels)
+    table_colors = pixel_colours(frame, table_pixels)
+    return Segmentation(points, colors, planes, (table, table_colors), labels, cut, occluded)

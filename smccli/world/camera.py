@@ -4,8 +4,11 @@ or a window of it (:class:`CameraRenderer`, used by :meth:`smccli.world.sim.Sim.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import mujoco
 import numpy as np
+from OpenGL import platform as gl_platform  # the GL library of mujoco's context (glFlush)
 
 from smccli.world.render_mesh import render_model
 from smccli.world.scene import HIDDEN_GROUP
@@ -23,6 +26,8 @@ class CameraRenderer:
         self.height = height
         self.width = width
         self._renderer: mujoco.Renderer | None = None
+        self._pending: Callable[[], np.ndarray] | None = None
+        """The colour pass drawn and not read yet (:meth:`render`): read before any other."""
 
     @property
     def near(self) -> float:
@@ -32,10 +37,11 @@ class CameraRenderer:
     def start(self, data: mujoco.MjData) -> None:
         """Build the renderer and render one frame, discarded, unless it runs already."""
         if self._renderer is None:
-            self.render(data)
+            self.render(data)[0]()
 
     def close(self) -> None:
-        """Free the GL context."""
+        """Free the GL context (a colour pass not read yet is read first)."""
+        self._settle()
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
@@ -48,7 +54,13 @@ class CameraRenderer:
         opt.sitegroup[:] = 0  # sites (the POI marker) are not seen by a real camera
         return opt
 
+    def _settle(self) -> None:
+        """Read a colour pass still in the framebuffer, before anything else draws there."""
+        if self._pending is not None:
+            self._pending()
+
     def _ready(self) -> mujoco.Renderer:
+        self._settle()
         if self._renderer is None:
             # The physics' data draws in a copy whose large meshes are simplified.
             drawn = render_model(self.model)
@@ -57,12 +69,36 @@ class CameraRenderer:
             self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
         return self._renderer
 
-    def render(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
-        """RGB (h, w, 3) uint8 and depth (h, w) float32 [m], 0 where nothing is seen."""
+    def render(self, data: mujoco.MjData) -> tuple[Callable[[], np.ndarray], np.ndarray]:
+        """The whole image: a function that returns its RGB (h, w, 3) uint8, and its depth
+        (h, w) float32 [m], 0 where nothing is seen.
+
+        The depth pass is drawn and read first; the lit pass is then drawn without
+        waiting for it (queued and flushed: Mesa's rasteriser threads draw it while the
+        caller works), and the function reads it back, waiting for it if it is not done
+        (a :class:`~smccli.world.sensors.DrawingFrame`'s ``fetch``). Anything else this
+        renderer draws reads it first. The pixels are the passes' own, as
+        ``mujoco.Renderer.render`` reads them.
+        """
+        depth = self._depth(data)
         r = self._ready()
         r.update_scene(data, camera=self.cam_id, scene_option=self._option())
-        rgb = r.render().copy()
-        return rgb, self._depth(data)
+        r._gl_context.make_current()
+        mujoco.mjr_render(r._rect, r.scene, r._mjr_context)
+        gl_platform.PLATFORM.GL.glFlush()  # start drawing now, not at the read
+        rgb: list[np.ndarray] = []
+
+        def fetch() -> np.ndarray:
+            if not rgb:
+                self._pending = None
+                r._gl_context.make_current()
+                out = np.empty((self.height, self.width, 3), dtype=np.uint8)
+                mujoco.mjr_readPixels(out, None, r._rect, r._mjr_context)
+                rgb.append(np.flipud(out).copy())  # GL rows count up from the bottom
+            return rgb[0]
+
+        self._pending = fetch
+        return fetch, depth
 
     def _depth(self, data: mujoco.MjData) -> np.ndarray:
         """The whole image's depth (h, w) float32 [m], 0 where nothing is seen."""

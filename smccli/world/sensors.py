@@ -10,7 +10,9 @@ pointing down; the gripper opening is in [0, 1] (1 = fully open). A mobile base'
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -66,6 +68,52 @@ class CameraFrame:
     T_world_camera: np.ndarray
     """Camera pose in the world, shape (4, 4); optical frame: x right, y down, z forward."""
     frame_id: str = "camera"
+
+
+_RGB_SLOT: Any = CameraFrame.__dict__["rgb"]
+"""Where a :class:`CameraFrame` keeps its colour image (the dataclass's slot)."""
+
+
+class DrawingFrame(CameraFrame):
+    """A :class:`CameraFrame` whose colour image is still being drawn when it is made:
+    ``rgb`` calls ``fetch`` at its first read, which waits for the rasteriser and reads
+    the image back, and keeps what it returns. Everything else reads as the frame's.
+
+    A simulated camera draws the depth first and the colours after it, without waiting
+    (:meth:`smccli.world.camera.CameraRenderer.render`): whoever reads the depth first
+    (perception lifts, crops, fits the table and clusters, then gathers the colours of
+    the points it kept) computes while the colours are drawn, on the other core.
+    """
+
+    __slots__ = ("_fetch",)
+    _fetch: Callable[[], np.ndarray] | None
+
+    def __init__(
+        self,
+        t: float,
+        rgb: np.ndarray | None,
+        depth: np.ndarray,
+        K: np.ndarray,
+        T_world_camera: np.ndarray,
+        frame_id: str = "camera",
+        *,
+        fetch: Callable[[], np.ndarray] | None = None,
+    ) -> None:
+        object.__setattr__(self, "_fetch", fetch)
+        CameraFrame.__init__(self, t, rgb, depth, K, T_world_camera, frame_id)  # type: ignore[arg-type]
+
+    def _get_rgb(self) -> np.ndarray:
+        fetch = self._fetch
+        if fetch is not None:
+            _RGB_SLOT.__set__(self, fetch())
+            object.__setattr__(self, "_fetch", None)
+        rgb: np.ndarray = _RGB_SLOT.__get__(self, CameraFrame)
+        return rgb
+
+    def _set_rgb(self, value: np.ndarray) -> None:  # the dataclass's __init__ sets it
+        _RGB_SLOT.__set__(self, value)
+
+    rgb = property(_get_rgb, _set_rgb)  # type: ignore[assignment]
 
 
 @dataclass(frozen=True, slots=True)

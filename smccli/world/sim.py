@@ -36,6 +36,7 @@ from smccli.world.scene import HIDDEN_GROUP, ROBOT_KEY, Layout, ObjectSpec, Scen
 from smccli.world.sensors import (
     CONTROL_PERIOD,
     CameraFrame,
+    DrawingFrame,
     JointState,
     PoiCommand,
     RobotGeometry,
@@ -500,20 +501,16 @@ class Sim:
         draws the window's depth alone (its image black).
         """
         cam = self._camera
-        if region is None:
-            rgb, depth = cam.render(self.data)
-        elif not self.camera_windows:
-            rgb, depth = cam.colour_region(self.data, region)
+        K, T = self.camera_matrix(), self.camera_pose()
+        if region is None:  # its colours are read when first used (DrawingFrame)
+            fetch, depth = cam.render(self.data)
+            frame: CameraFrame = DrawingFrame(self.t, None, depth, K, T, fetch=fetch)
         else:
-            rgb, depth = cam.region(self.data, region, colour)
-        frame = CameraFrame(
-            t=self.t,
-            rgb=rgb,
-            depth=depth,
-            K=self.camera_matrix(),
-            T_world_camera=self.camera_pose(),
-            frame_id="camera",
-        )
+            if not self.camera_windows:
+                rgb, depth = cam.colour_region(self.data, region)
+            else:
+                rgb, depth = cam.region(self.data, region, colour)
+            frame = CameraFrame(self.t, rgb, depth, K, T)
         return frame if self.camera_windows else self.sensor_noise.frame(frame, region)
 
     def camera_near(self) -> float:
