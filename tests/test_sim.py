@@ -11,7 +11,7 @@ import pytest
 
 from smccli.world.layout import nominal_layout
 from smccli.world.scene import load_scene
-from smccli.world.sensors import PoiCommand
+from smccli.world.sensors import CameraFrame, DrawingFrame, PoiCommand
 from smccli.world.sim import HIDDEN_GROUP, Sim
 from smccli.world.truth import Truth
 
@@ -289,8 +289,8 @@ def test_a_noisy_region_is_the_whole_noisy_frame_there_to_the_bit() -> None:
 
 
 def test_a_frame_read_late_holds_the_instant_it_was_drawn_to_the_bit() -> None:
-    """A whole frame's colours are drawn after its depth and read at their first use
-    (DrawingFrame): read after the world moved and the camera drew again (a whole frame
+    """A decision's frame has its colours drawn after its depth and read at their first
+    use (DrawingFrame): read after the world moved and the camera drew again (a whole frame
     and a window), they are still the instant's, to the bit of mujoco.Renderer's lit
     pass then."""
     sim = Sim(load_scene("pick_place"))
@@ -302,11 +302,12 @@ def test_a_frame_read_late_holds_the_instant_it_was_drawn_to_the_bit() -> None:
     for _ in range(3):
         renderer.update_scene(sim.data, camera=sim._camera.cam_id, scene_option=option)
         expected.append(renderer.render().copy())
-        early.append(sim.render_camera())
+        early.append(sim.render_camera(colour_later=True))
         for _ in range(40):  # the arm moves into view and out of its home pose
             sim.step(PoiCommand(sim.t, sim.poi() + [0.004, -0.003, -0.004, 0.01], 0.2))
     sim.render_camera((60, 150, 100, 220))
     later = sim.render_camera()
+    assert all(type(f) is DrawingFrame for f in early) and type(later) is CameraFrame
     for frame, rgb in zip(early, expected, strict=True):
         assert np.array_equal(frame.rgb, rgb)
     assert not np.array_equal(later.rgb, expected[-1])

@@ -185,7 +185,8 @@ class TreeExecutor:
         s = self.sensors
         t = s.t
         t0 = time.perf_counter()
-        frame = self._frame = s.render_camera()
+        # The colours are drawn while perception works on the depth (DrawingFrame).
+        frame = self._frame = s.render_camera(colour_later=True)
         if s.mobile_manipulator:  # every reading: a node decides as a base or as an arm
             scan, lidar_pose, geometry, base = (
                 s.lidar(),

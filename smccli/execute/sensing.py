@@ -103,12 +103,17 @@ class Sensors:
         return pose
 
     def render_camera(
-        self, region: tuple[int, int, int, int] | None = None, colour: bool = True
+        self,
+        region: tuple[int, int, int, int] | None = None,
+        colour: bool = True,
+        *,
+        colour_later: bool = False,
     ) -> CameraFrame:
         """An RGB-D frame; with ``region`` ``(v0, v1, u0, u1)`` only those rows and columns
-        are read (elsewhere no reading), without ``colour`` the depth alone:
-        :meth:`Sim.render_camera`."""
-        return self._sim.render_camera(region, colour)
+        are read (elsewhere no reading), without ``colour`` the depth alone, with
+        ``colour_later`` the colours read at their first use (a decision perceives the
+        depth while they are drawn): :meth:`Sim.render_camera`."""
+        return self._sim.render_camera(region, colour, colour_later=colour_later)
 
     def camera_view(self) -> tuple[np.ndarray, np.ndarray, tuple[int, int], float]:
         """The camera's intrinsics K (3, 3) [px], pose T_world_camera (4, 4, optical frame),

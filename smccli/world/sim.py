@@ -483,7 +483,11 @@ class Sim:
         return self.sensor_noise.noise.camera == CameraNoise()
 
     def render_camera(
-        self, region: tuple[int, int, int, int] | None = None, colour: bool = True
+        self,
+        region: tuple[int, int, int, int] | None = None,
+        colour: bool = True,
+        *,
+        colour_later: bool = False,
     ) -> CameraFrame:
         """RGB and metric depth (along the optical axis) from the scene's sensor camera.
 
@@ -499,12 +503,18 @@ class Sim:
         the bit, its colours too but for a rare pixel on an edge, and every later draw is
         the same (:meth:`NoisySensors.frame`). Without ``colour`` a camera without noise
         draws the window's depth alone (its image black).
+        With ``colour_later`` a whole frame of a camera without noise is a
+        :class:`~smccli.world.sensors.DrawingFrame`: its colours are drawn while the caller
+        works on its depth, and read at their first use, in this thread.
         """
         cam = self._camera
         K, T = self.camera_matrix(), self.camera_pose()
-        if region is None:  # its colours are read when first used (DrawingFrame)
+        if region is None:
             fetch, depth = cam.render(self.data)
-            frame: CameraFrame = DrawingFrame(self.t, None, depth, K, T, fetch=fetch)
+            if colour_later and self.camera_windows:  # (a noisy camera reads them now)
+                frame: CameraFrame = DrawingFrame(self.t, None, depth, K, T, fetch=fetch)
+            else:
+                frame = CameraFrame(self.t, fetch(), depth, K, T)
         else:
             if not self.camera_windows:
                 rgb, depth = cam.colour_region(self.data, region)
