@@ -9,6 +9,7 @@ rays were cast from, read only in assertions.
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -213,6 +214,25 @@ def test_the_same_scans_align_to_the_same_bits(rng):
         for a in (align_scans(target, source) for _ in range(12))
     }
     assert len(runs) == 1
+
+
+def test_seeds_on_two_threads_align_as_on_one(rng, monkeypatch):
+    """A search's seeds run on two threads (a room's decision in about two thirds of the
+    time): the same transform, fitness and RMSE to the bit as one after the other."""
+    from smccli.perception import scan
+
+    target_pose = np.r_[CENTRES["B"], -0.4]
+    pairs = [
+        (cast(ROOMS["B"], target_pose, rng), cast(ROOMS["B"], target_pose + d, rng))
+        for d in ([0.4, -0.3, 0.7], [-0.2, 0.1, 2.5], [0.0, 0.3, -1.9])
+    ]
+    threads = [align_scans(t, s) for t, s in pairs]
+    assert scan._POOL is not None or (os.cpu_count() or 1) < 2  # they ran on the pool
+    monkeypatch.setattr(scan, "_map_seeds", lambda refine, seeds: [refine(T) for T in seeds])
+    one = [align_scans(t, s) for t, s in pairs]
+    for a, b in zip(threads, one, strict=True):
+        assert a.T_target_source.tobytes() == b.T_target_source.tobytes()
+        assert (a.fitness, a.rmse) == (b.fitness, b.rmse)
 
 
 def test_memo_makes_once_and_drops_the_least_recently_used():

@@ -16,9 +16,11 @@ matrices, ``T_a_b`` mapping points of frame b into frame a (:mod:`smccli.world.g
 
 from __future__ import annotations
 
+import os
 import threading
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
@@ -243,6 +245,26 @@ def _target_cloud(xy: np.ndarray, k: int) -> o3d.geometry.PointCloud:
     return _TARGETS.get((xy.tobytes(), k), lambda: _cloud(xy, _normals_2d(xy, k)))
 
 
+_POOL: tuple[int, ThreadPoolExecutor] | None = None
+"""This process's threads for the seeds of :func:`align_scans` (its pid: a forked campaign
+worker makes its own)."""
+
+
+def _map_seeds(
+    refine: Callable[[np.ndarray], tuple[np.ndarray, float, float]], seeds: list[np.ndarray]
+) -> list[tuple[np.ndarray, float, float]]:
+    """``refine`` of each seed, in order: on two threads when there are several seeds and
+    cores. open3d's ICP lets go of the GIL and each call runs on one thread of its own
+    (``o3d.utility.set_max_threads(1)``), so the results are a single thread's to the bit;
+    a room's decision aligns a scan per SMC, 12 seeds each, which was most of its time."""
+    global _POOL
+    if len(seeds) < 2 or (os.cpu_count() or 1) < 2:
+        return [refine(T) for T in seeds]
+    if _POOL is None or _POOL[0] != os.getpid():
+        _POOL = (os.getpid(), ThreadPoolExecutor(2, thread_name_prefix="smc-icp"))
+    return list(_POOL[1].map(refine, seeds))
+
+
 def _checked_points(scan: Scan2D, role: str) -> np.ndarray:
     xy = scan.points()
     if len(xy) < _MIN_POINTS:
@@ -304,12 +326,14 @@ def align_scans(
         seeds.append(T)
     if initial is not None:
         seeds.append(np.asarray(initial, dtype=np.float64))
-    results = []
-    for T in seeds:
+
+    def refine(T: np.ndarray) -> tuple[np.ndarray, float, float]:
         for d in params.coarse_distances:
             T = icp(T, d)
         # A lone seed (tracking) wins unscored: one of its two evaluations saved.
-        results.append((T, *score(T)) if len(seeds) > 1 else (T, 0.0, 0.0))
+        return (T, *score(T)) if len(seeds) > 1 else (T, 0.0, 0.0)
+
+    results = _map_seeds(refine, seeds)
     best_fit = max(f for _, f, _ in results)
     T, _, _ = min((r for r in results if r[1] >= best_fit - params.fitness_tie), key=lambda r: r[2])
     T = icp(T, params.fine_distance)
