@@ -81,24 +81,37 @@ class CameraRenderer:
         ``mujoco.Renderer.render`` reads them.
         """
         depth = self._depth(data)
-        r = self._ready()
-        r.update_scene(data, camera=self.cam_id, scene_option=self._option())
-        r._gl_context.make_current()
-        mujoco.mjr_render(r._rect, r.scene, r._mjr_context)
+        return self._colour_later(data, None), depth
+
+    def _colour_later(
+        self, data: mujoco.MjData, region: tuple[int, int, int, int] | None
+    ) -> Callable[[], np.ndarray]:
+        """Draw the lit pass of the whole image (``region`` None) or of a window, without
+        waiting for it; the function returned reads it back once (RGB (h, w, 3) uint8,
+        black outside the window) and is this renderer's pending read until then."""
+        if region is None:
+            r = self._ready()
+            r.update_scene(data, camera=self.cam_id, scene_option=self._option())
+            r._gl_context.make_current()
+            mujoco.mjr_render(r._rect, r.scene, r._mjr_context)
+            rect, (v0, v1, u0, u1) = r._rect, (0, self.height, 0, self.width)
+        else:
+            r, rect = self._draw_window(data, region, segment=False)
+            v0, v1, u0, u1 = region
         gl_platform.PLATFORM.GL.glFlush()  # start drawing now, not at the read
         rgb: list[np.ndarray] = []
 
         def fetch() -> np.ndarray:
             if not rgb:
                 self._pending = None
-                r._gl_context.make_current()
-                out = np.empty((self.height, self.width, 3), dtype=np.uint8)
-                mujoco.mjr_readPixels(out, None, r._rect, r._mjr_context)
-                rgb.append(np.flipud(out).copy())  # GL rows count up from the bottom
+                out = np.zeros((self.height, self.width, 3), dtype=np.uint8)
+                if v1 > v0 and u1 > u0:
+                    out[v0:v1, u0:u1] = self._read_window(r, rect, segment=False)
+                rgb.append(out)
             return rgb[0]
 
         self._pending = fetch
-        return fetch, depth
+        return fetch
 
     def _depth(self, data: mujoco.MjData) -> np.ndarray:
         """The whole image's depth (h, w) float32 [m], 0 where nothing is seen."""
@@ -143,17 +156,13 @@ class CameraRenderer:
 
     def colour_region(
         self, data: mujoco.MjData, region: tuple[int, int, int, int]
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """The colours of :meth:`region` (the window's, black elsewhere) and the whole
-        image's depth as :meth:`render` gives it, to the bit: for a camera whose noise
-        depends on which pixels have a reading and on the depth edges (the lit pass is
-        about 70 % of a frame's time, 7 of 10 ms at 320x240; the window's about 2.7)."""
-        h, w = self.height, self.width
-        v0, v1, u0, u1 = region
-        rgb = np.zeros((h, w, 3), dtype=np.uint8)
-        if v1 > v0 and u1 > u0:
-            rgb[v0:v1, u0:u1] = self._window(data, region, segment=False)
-        return rgb, self._depth(data)
+    ) -> tuple[Callable[[], np.ndarray], np.ndarray]:
+        """As :meth:`render`, the colours of :meth:`region`'s window alone (black
+        elsewhere), the whole image's depth to the bit: for a camera whose noise depends on
+        which pixels have a reading and on the depth edges (the lit pass is about 70 % of a
+        frame's time, 7 of 10 ms at 320x240; the window's about 2.7)."""
+        depth = self._depth(data)
+        return self._colour_later(data, region), depth
 
     def _window(
         self, data: mujoco.MjData, region: tuple[int, int, int, int], segment: bool
@@ -161,6 +170,13 @@ class CameraRenderer:
         """One pass drawn in the (non-empty) window of :meth:`region`, top row first: RGB
         (v1 - v0, u1 - u0, 3) uint8 lit, or the segmented pass's raw depth buffer
         (v1 - v0, u1 - u0) float32."""
+        r, rect = self._draw_window(data, region, segment)
+        return self._read_window(r, rect, segment)
+
+    def _draw_window(
+        self, data: mujoco.MjData, region: tuple[int, int, int, int], segment: bool
+    ) -> tuple[mujoco.Renderer, mujoco.MjrRect]:
+        """Draw one pass of :meth:`_window` (not read yet): the renderer and the viewport."""
         h, w = self.height, self.width
         v0, v1, u0, u1 = region
         r = self._ready()
@@ -179,13 +195,19 @@ class CameraRenderer:
         scene.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = segment
         scene.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = segment
         mujoco.mjr_render(rect, scene, ctx)
-        if segment:
-            out = np.empty((v1 - v0, u1 - u0), dtype=np.float32)
-            mujoco.mjr_readPixels(None, out, rect, ctx)
-        else:
-            out = np.empty((v1 - v0, u1 - u0, 3), dtype=np.uint8)
-            mujoco.mjr_readPixels(out, None, rect, ctx)
         np.copyto(scene.flags, flags)
+        return r, rect
+
+    @staticmethod
+    def _read_window(r: mujoco.Renderer, rect: mujoco.MjrRect, segment: bool) -> np.ndarray:
+        """Read the pass just drawn in ``rect``, top row first (:meth:`_window`)."""
+        r._gl_context.make_current()
+        if segment:
+            out = np.empty((rect.height, rect.width), dtype=np.float32)
+            mujoco.mjr_readPixels(None, out, rect, r._mjr_context)
+        else:
+            out = np.empty((rect.height, rect.width, 3), dtype=np.uint8)
+            mujoco.mjr_readPixels(out, None, rect, r._mjr_context)
         return np.flipud(out)
 
     def _metric(self, buffer: np.ndarray) -> np.ndarray:

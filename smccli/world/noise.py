@@ -180,8 +180,23 @@ class NoisySensors:
         self.scale_offset = self.rng.uniform(-s.offset, s.offset) if not noise.ideal else 0.0
         self.scale_drift = self.rng.uniform(-s.drift, s.drift) if not noise.ideal else 0.0
 
+    def draws(self, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """This frame's draws (:meth:`frame`'s, in its order) for the whole image's noiseless
+        ``depth`` (h, w) [m]: depth normals (one per pixel with a reading), hole uniforms
+        (h, w), colour normals (h, w, 3) float64; None for a camera without noise. They
+        depend on the depth alone: a simulator draws them while the colours are drawn."""
+        if self.noise.camera == CameraNoise():
+            return None
+        rng = self.rng
+        valid = np.isfinite(depth) & (depth > 0)
+        normals = rng.standard_normal(np.count_nonzero(valid))
+        return normals, rng.random(depth.shape), rng.standard_normal((*depth.shape, 3))
+
     def frame(
-        self, frame: CameraFrame, region: tuple[int, int, int, int] | None = None
+        self,
+        frame: CameraFrame,
+        region: tuple[int, int, int, int] | None = None,
+        draws: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> CameraFrame:
         """The frame as the camera would give it: noisy depth with holes, noisy colour.
 
@@ -190,7 +205,8 @@ class NoisySensors:
         for the whole frame all the same (below): those pixels are the whole frame's to the
         bit, and every later draw is as without ``region``. ``frame.depth`` must then hold
         the whole image's readings (which pixels have one, and the window's neighbours for
-        its edges); ``frame.rgb`` only the window's.
+        its edges); ``frame.rgb`` only the window's. ``draws``: :meth:`draws` of this
+        frame's depth, made already (else made here).
 
         Draws per frame, in this order: one standard normal per pixel with a reading (finite,
         > 0) of the whole image in row-major order (depth), one uniform per pixel (holes),
@@ -199,12 +215,13 @@ class NoisySensors:
         c = self.noise.camera
         if c == CameraNoise():
             return frame
-        rng = self.rng
         h, w = frame.depth.shape
         v0, v1, u0, u1 = (0, h, 0, w) if region is None else region
         full = frame.depth
         valid = np.isfinite(full) & (full > 0)
-        normals = rng.standard_normal(np.count_nonzero(valid))
+        made = draws if draws is not None else self.draws(full)
+        assert made is not None  # a camera with noise draws
+        normals, holes, grain_whole = made
         depth = full[v0:v1, u0:u1].astype(np.float32, copy=True)
         seen_at = valid[v0:v1, u0:u1]
         if region is not None:
@@ -227,11 +244,11 @@ class NoisySensors:
         anywhere = float(np.float32(c.dropout))
         edge, dark = max(anywhere, c.edge_dropout), max(anywhere, c.dark_dropout)
         p = np.array([anywhere, edge, dark, max(edge, dark)])
-        depth[rng.random((h, w))[v0:v1, u0:u1] < p[kind]] = 0.0
+        depth[holes[v0:v1, u0:u1] < p[kind]] = 0.0
         depth[depth < 0] = 0.0
         rgb = rows if region is None else rows[:, u0:u1].copy()
         rgb *= self.gain.astype(np.float32)
-        grain = rng.standard_normal((h, w, 3))[v0:v1, u0:u1].astype(np.float32)
+        grain = grain_whole[v0:v1, u0:u1].astype(np.float32)
         grain *= c.colour_sigma
         rgb += grain
         rgb *= 255.0

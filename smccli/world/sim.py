@@ -505,23 +505,24 @@ class Sim:
         draws the window's depth alone (its image black).
         With ``colour_later`` a whole frame of a camera without noise is a
         :class:`~smccli.world.sensors.DrawingFrame`: its colours are drawn while the caller
-        works on its depth, and read at their first use, in this thread.
+        works on its depth, and read at their first use, in this thread. A noisy camera's
+        colours are drawn while its noise is drawn (:meth:`NoisySensors.draws`).
         """
-        cam = self._camera
+        cam, noise = self._camera, self.sensor_noise
         K, T = self.camera_matrix(), self.camera_pose()
+        if region is not None and self.camera_windows:
+            rgb, depth = cam.region(self.data, region, colour)
+            return CameraFrame(self.t, rgb, depth, K, T)
         if region is None:
             fetch, depth = cam.render(self.data)
-            if colour_later and self.camera_windows:  # (a noisy camera reads them now)
-                frame: CameraFrame = DrawingFrame(self.t, None, depth, K, T, fetch=fetch)
-            else:
-                frame = CameraFrame(self.t, fetch(), depth, K, T)
         else:
-            if not self.camera_windows:
-                rgb, depth = cam.colour_region(self.data, region)
-            else:
-                rgb, depth = cam.region(self.data, region, colour)
-            frame = CameraFrame(self.t, rgb, depth, K, T)
-        return frame if self.camera_windows else self.sensor_noise.frame(frame, region)
+            fetch, depth = cam.colour_region(self.data, region)
+        if self.camera_windows:
+            if colour_later:
+                return DrawingFrame(self.t, None, depth, K, T, fetch=fetch)
+            return CameraFrame(self.t, fetch(), depth, K, T)
+        draws = noise.draws(depth)  # while the colours are drawn
+        return noise.frame(CameraFrame(self.t, fetch(), depth, K, T), region, draws)
 
     def camera_near(self) -> float:
         """The camera's near clipping distance [m]: no depth reading is nearer."""
