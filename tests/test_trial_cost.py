@@ -37,6 +37,10 @@ def test_the_probe_times_each_stage_and_leaves_the_outcomes_alone(sample_trees) 
     assert 0 < spent["action"] < spent["trial"]
     assert spent["render:action"] + spent["render:decision"] == pytest.approx(spent["render"])
     assert calls["decide"] == len(probe["latency_ms"])
+    # Each call's time is kept by who asked: a decision renders one frame.
+    per_call = probe["per_call_ms"]
+    assert len(per_call["render:decision"]) == calls["decide"]
+    assert sum(per_call["render:decision"]) == pytest.approx(1e3 * spent["render:decision"])
     from smccli.execute.campaign import run_trials
     from smccli.execute.episode import resolve
 

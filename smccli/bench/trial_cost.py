@@ -8,7 +8,8 @@ its own sample tree, then runs the same ``--trials`` trials (``--seed``) in one 
 that both see the same machine. Reported per checkout, as ratios where the machine's speed
 varies: a trial's wall time over its ``mj_step`` time, steering's (the Cartesian
 controller) and looking again's (rendering and perceiving during an action) share of a
-trial, and decision latency p50/p95 [ms] (perceive + match) with its perception part. The
+trial, and decision latency p50/p95 [ms] (perceive + match) with its perception part, and
+per stage of a decision the p50/p95 of a call and the calls per decision. The
 outcomes (outcome, path, reason per trial) of the two checkouts must be the same, else
 exit 1. Writes ``docs/bench_trial_cost.json`` (``--out``).
 """
@@ -90,6 +91,7 @@ def _summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
     latency = [ms for r in runs for ms in r["latency_ms"]]
     perceive = [ms for r in runs for ms in r["perceive_ms"]]
     return {
+        "decision_stages_ms": _decision_stages(runs, len(latency)),
         "trial_over_physics": ratio("trial", "physics"),
         "steering_over_physics": ratio("steering", "physics"),
         "looking_share_of_trial": float(np.median(look)),
@@ -100,6 +102,30 @@ def _summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
         "stages_s": runs[-1]["spent_s"],
         "calls": runs[-1]["calls"],
         "missing_stages": runs[-1]["missing"],
+    }
+
+
+def _decision_stages(runs: list[dict[str, Any]], decisions: int) -> dict[str, dict[str, float]]:
+    """Per stage of a decision (rendering, the clusters' or the room's perception, a scan's
+    alignment, matching): p50 and p95 of one call [ms] and calls per decision. A checkout
+    whose probe kept no call times (or lacks the stage) has none."""
+    calls = {k.split(":")[0]: k for k in runs[0].get("per_call_ms", {}) if k.endswith(":decision")}
+    out = {}
+    for stage, key in sorted(calls.items()):
+        ms = [x for r in runs for x in r["per_call_ms"].get(key, [])]
+        if ms:
+            out[stage] = _percentiles(ms, len(ms) / max(decisions, 1))
+    match = [ms for r in runs for ms in r["match_ms"]]
+    if match:
+        out["match"] = _percentiles(match, 1.0)
+    return out
+
+
+def _percentiles(ms: list[float], per_decision: float) -> dict[str, float]:
+    return {
+        "p50": float(np.percentile(ms, 50)),
+        "p95": float(np.percentile(ms, 95)),
+        "per_decision": per_decision,
     }
 
 
@@ -166,6 +192,14 @@ def main(argv: list[str] | None = None) -> int:
             f"decision p50 {r['decision_p50_ms']:.0f} ms (perceive {r['perceive_p50_ms']:.0f})  "
             f"{r['trials_per_s']:.2f} trials/s"
         )
+        stages = r["decision_stages_ms"]
+        if stages:
+            print(
+                f"{'':31s}decision stages p50: "
+                + ", ".join(
+                    f"{k} {v['p50']:.1f} ms x{v['per_decision']:.1f}" for k, v in stages.items()
+                )
+            )
     if not same:
         print("outcomes differ between the checkouts", file=sys.stderr)
     return 0 if same else 1

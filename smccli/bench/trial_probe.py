@@ -28,16 +28,20 @@ TIMED = {
     "steering": ("smccli.world.controller", "CartesianController", "update"),
     "render": ("smccli.world.sim", "Sim", "render_camera"),
     "perception": ("smccli.perception.clusters", None, "clusters_from_frame"),
+    "room": ("smccli.perception.room", None, "room_histogram"),
+    "align": ("smccli.perception.scan", None, "align_scans"),
     "decide": ("smccli.execute.policy", "TreePolicy", "decide"),
     "action": ("smccli.execute.executor", "TreeExecutor", "execute"),
     "trial": ("smccli.execute.campaign", None, "run_trial"),
 }
 """Stage -> (module, class or None, function)."""
-SPLIT = ("render", "perception", "lidar")
-"""Stages also counted by the caller they ran under (``action`` or ``decision``)."""
+SPLIT = ("render", "perception", "lidar", "room", "align")
+"""Stages also counted by the caller they ran under (``action`` or ``decision``), each call's
+time kept too."""
 
 _spent: dict[str, float] = defaultdict(float)
 _calls: dict[str, int] = defaultdict(int)
+_per_call: dict[str, list[float]] = defaultdict(list)
 _active: list[str] = []
 
 
@@ -56,6 +60,7 @@ def _timed(stage: str, fn: Any) -> Any:
             if stage in SPLIT:
                 caller = "action" if "action" in _active else "decision"
                 _spent[f"{stage}:{caller}"] += dt
+                _per_call[f"{stage}:{caller}"].append(1e3 * dt)
 
     return timed
 
@@ -97,6 +102,7 @@ def main(tree_path: str, scene: str, trials: int, seed: int) -> dict[str, Any]:
         "latency_ms": [ms for r in results for ms in r.latency_ms],
         "perceive_ms": [ms for r in results for ms in r.perceive_ms],
         "match_ms": [ms for r in results for ms in r.match_ms],
+        "per_call_ms": dict(_per_call),
         "outcomes": [[r.index, r.outcome, r.path, r.reason] for r in results],
     }
 
