@@ -85,10 +85,13 @@ def outside_hull(xy: np.ndarray, hull: np.ndarray) -> np.ndarray:
     normals[inner > 0] *= -1
     # The two products of each (point, edge) and their sum, as ``np.einsum("kj,nkj->nk",
     # normals, xy[:, None, :] - hull[None])`` makes them (a sum of two is the same either
-    # way round), without the (n, k, 2) differences: 0.7 to 0.45 ms for 3 k points.
-    out = (xy[:, 0:1] - hull[:, 0]) * normals[:, 0]
-    out += (xy[:, 1:2] - hull[:, 1]) * normals[:, 1]
-    return np.max(out, axis=1)
+    # way round), without the (n, k, 2) differences: 0.7 to 0.45 ms for 3 k points; laid
+    # out (k, n), edge by edge, the largest is taken across rows, not along rows of ~15:
+    # 0.15 to 0.05 ms for a decision's 600.
+    x, y = xy[:, 0].copy(), xy[:, 1].copy()
+    out = (x - hull[:, 0:1]) * normals[:, 0:1]
+    out += (y - hull[:, 1:2]) * normals[:, 1:2]
+    return np.max(out, axis=0)
 
 
 def _outside_top(xy: np.ndarray, top: np.ndarray) -> np.ndarray:
