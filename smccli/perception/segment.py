@@ -43,7 +43,11 @@ def _pixels(points: np.ndarray, frame: CameraFrame) -> tuple[np.ndarray, np.ndar
 
 
 def attach_hidden_parts(
-    points: np.ndarray, labels: np.ndarray, frame: CameraFrame, params: PerceptionParams
+    points: np.ndarray,
+    labels: np.ndarray,
+    frame: CameraFrame,
+    params: PerceptionParams,
+    projected: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Labels (n,) with each hidden part merged into the cluster that hides it.
 
@@ -54,13 +58,14 @@ def attach_hidden_parts(
     two points within ``attach_gap`` of each other, ``a``'s top is lower than ``b``'s and
     ``a`` has at most ``attach_max_ratio`` times ``b``'s points.
     Touching in the image means nothing visible lies between them (no table); an object
-    standing apart shows table in between.
+    standing apart shows table in between. ``projected``: the points' :func:`_pixels`, if
+    already made.
     """
     n_labels = int(labels.max(initial=-1)) + 1
     if n_labels < 2:
         return labels
     h, w = np.asarray(frame.depth).shape[:2]
-    u, v, z = _pixels(points, frame)
+    u, v, z = _pixels(points, frame) if projected is None else projected
     inside = (labels >= 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
     idx = np.flatnonzero(inside)
     # A one-pixel border of no point: a neighbour's flat index is the pixel's plus a
@@ -68,14 +73,14 @@ def attach_hidden_parts(
     index = np.full((h + 2) * (w + 2), -1, dtype=np.int64)
     at = (v[idx] + 1) * (w + 2) + (u[idx] + 1)
     index[at] = idx
-    pairs = []
-    for du, dv in ((1, 0), (0, 1), (1, 1), (1, -1)):  # each unordered neighbour pair once
-        j = np.take(index, at + (dv * (w + 2) + du))
-        keep = j >= 0
-        i, j = idx[keep], j[keep]
-        keep = labels[i] != labels[j]
-        pairs.append(np.stack([i[keep], j[keep]], axis=1))
-    ij = np.concatenate(pairs)
+    # Each unordered neighbour pair once, the four directions at once (4, m): the pairs
+    # in the order of a loop over them, 0.1 ms less.
+    step = np.array([dv * (w + 2) + du for du, dv in ((1, 0), (0, 1), (1, 1), (1, -1))])
+    j = np.take(index, at + step[:, None])
+    keep = j >= 0
+    i, j = np.broadcast_to(idx, j.shape)[keep], j[keep]
+    keep = labels[i] != labels[j]
+    ij = np.stack([i[keep], j[keep]], axis=1)
     if len(ij) == 0:
         return labels
     # Order each pair as (farther, nearer) and keep those bridging a small gap.
@@ -224,7 +229,11 @@ def cut_points(
 
 
 def outline_points(
-    points: np.ndarray, labels: np.ndarray, frame: CameraFrame, params: PerceptionParams
+    points: np.ndarray,
+    labels: np.ndarray,
+    frame: CameraFrame,
+    params: PerceptionParams,
+    projected: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Two masks (n,) of the points on their cluster's outline in the image, in one pass
     over the 8-neighbourhood of each point's pixel:
@@ -236,10 +245,12 @@ def outline_points(
       frame hides part of the object (:attr:`~smccli.perception.clusters.Cluster.hidden`).
       A neighbour level with it (an object touching it) or without a reading (a hole of a
       noisy depth camera) is not in front of it.
+
+    ``projected``: the points' :func:`_pixels`, if already made.
     """
     depth = np.asarray(frame.depth)
     h, w = depth.shape[:2]
-    u, v, z = _pixels(points, frame)
+    u, v, z = _pixels(points, frame) if projected is None else projected
     ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
     # Images with a one-pixel border (label -3, no reading): a neighbour's flat index is
     # the pixel's plus a constant, no bounds to test; 0.9 to 0.4 ms a decision.
@@ -254,23 +265,18 @@ def outline_points(
     occluded = ~ok
     lab, zi = labels[i], z[i]
     ahead, beyond = zi + params.silhouette_step, zi - params.silhouette_step
-    c = np.zeros(len(i), dtype=bool)
-    o = np.zeros(len(i), dtype=bool)
-    for du in (-1, 0, 1):
-        for dv in (-1, 0, 1):
-            if du == 0 and dv == 0:
-                continue
-            nb = at + (dv * (w + 2) + du)
-            other = np.take(img.reshape(-1), nb)
-            edge = other == -3  # the image's edge
-            other = other != lab
-            d = np.take(pad.reshape(-1), nb).astype(np.float64)
-            behind = np.isfinite(d) & (d > ahead)
-            c |= other & ~behind
-            nearer = np.isfinite(d) & (d > 0) & (d < beyond)
-            o |= (other & nearer) | edge
-    cut[i] |= c
-    occluded[i] |= o
+    # The eight neighbours at once (8, m): 0.18 to 0.08 ms a decision.
+    step = np.array([dv * (w + 2) + du for du in (-1, 0, 1) for dv in (-1, 0, 1) if du or dv])
+    nb = at + step[:, None]
+    other = np.take(img.reshape(-1), nb)
+    edge = other == -3  # the image's edge
+    other = other != lab
+    d = np.take(pad.reshape(-1), nb).astype(np.float64)
+    finite = np.isfinite(d)
+    behind = finite & (d > ahead)
+    cut[i] |= np.any(other & ~behind, axis=0)
+    nearer = finite & (d > 0) & (d < beyond)
+    occluded[i] |= np.any((other & nearer) | edge, axis=0)
     return cut, occluded
 
 
@@ -307,9 +313,10 @@ def segment_frame(
     points, pixels, planes, (table, table_pixels) = object_pixels_on_planes(
         frame, robot, params, base
     )
-    labels = attach_hidden_parts(points, cluster_labels(points, params), frame, params)
+    projected = _pixels(points, frame)
+    labels = attach_hidden_parts(points, cluster_labels(points, params), frame, params, projected)
     labels = join_split_parts(points, labels, planes, params)
-    cut, occluded = outline_points(points, labels, frame, params)
+    cut, occluded = outline_points(points, labels, frame, params, projected)
     # The colours last: a simulated camera's may still be drawing until here (DrawingFrame).
     colors = pixel_colours(frame, pixels)
     table_colors = pixel_colours(frame, table_pixels)
