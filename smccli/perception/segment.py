@@ -152,8 +152,9 @@ def standing_clusters(
         idx = np.flatnonzero(labels == k)
         if len(idx) < min_points:
             continue
-        plane = support_of(points[idx], planes, params)
-        if plane is not None and float(heights_above(points[idx], plane).min()) <= params.join_base:
+        mine = points[idx]
+        plane = support_of(mine, planes, params)
+        if plane is not None and float(heights_above(mine, plane).min()) <= params.join_base:
             out.append((k, idx, plane))
     return out
 
@@ -177,10 +178,13 @@ def join_split_parts(
     n_labels = int(labels.max(initial=-1)) + 1
     if n_labels < 2:
         return labels
-    standing = [
-        (k, points[idx, :2].astype(np.float64), plane)
-        for k, idx, plane in standing_clusters(points, labels, planes, params, min_points=3)
-    ]
+    standing = []
+    for k, idx, plane in standing_clusters(points, labels, planes, params, min_points=3):
+        xy = points[idx, :2].astype(np.float64)
+        # Its bounds column by column: ``xy.min(axis=0)`` loops over rows of two, ~10 times
+        # slower (0.2 ms a decision); the same values.
+        lo = np.array([xy[:, 0].min(), xy[:, 1].min()])
+        standing.append((k, xy, plane, lo, np.array([xy[:, 0].max(), xy[:, 1].max()])))
     parent = np.arange(n_labels)
 
     def root(a: int) -> int:
@@ -189,20 +193,15 @@ def join_split_parts(
         return a
 
     grow = max(int(round(params.join_margin / JOIN_CELL)), 0)
-    for i, (a, xa, pa) in enumerate(standing):
-        for b, xb, pb in standing[i + 1 :]:
+    for i, (a, xa, pa, la, ha) in enumerate(standing):
+        for b, xb, pb, lb, hb in standing[i + 1 :]:
             if pa is not pb or root(a) == root(b):
                 continue
             reach = 2 * params.join_margin
-            if np.any(
-                np.maximum(xa.min(axis=0), xb.min(axis=0)) - reach
-                > np.minimum(xa.max(axis=0), xb.max(axis=0))
-            ):
+            if np.any(np.maximum(la, lb) - reach > np.minimum(ha, hb)):
                 continue  # bounding boxes too far apart to overlap
-            lo = np.minimum(xa.min(axis=0), xb.min(axis=0)) - reach
-            cols, rows = (
-                np.ceil((np.maximum(xa.max(axis=0), xb.max(axis=0)) + reach - lo) / JOIN_CELL) + 1
-            ).astype(int)
+            lo = np.minimum(la, lb) - reach
+            cols, rows = (np.ceil((np.maximum(ha, hb) + reach - lo) / JOIN_CELL) + 1).astype(int)
             shape = (int(rows), int(cols))
             ma = _footprint_mask(xa, lo, shape, grow)
             mb = _footprint_mask(xb, lo, shape, grow)
