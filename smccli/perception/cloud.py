@@ -281,13 +281,14 @@ def self_filter_mask(points: np.ndarray, robot: RobotGeometry | None) -> np.ndar
     # 5 ms a decision. The test itself is the same arithmetic on those pairs. The tree
     # holds only the points in the spheres' bounding box (about half of a decision's), and
     # unbalanced it builds in half the time; any tree names every pair the test keeps:
-    # 2.1 to 0.9 ms a decision.
+    # 2.1 to 0.9 ms a decision. Leaves of 128 points, searched point by point, cost less
+    # than the descent to leaves of 16: 0.85 to 0.73 ms (weigh_sort's 1.36 to 1.13 ms).
     reach = radii * (1 + 1e-9) + 1e-12
     lo, hi = (centers - reach[:, None]).min(axis=0), (centers + reach[:, None]).max(axis=0)
     candidates = np.flatnonzero(_in_box(points.T, lo, hi))
     if not len(candidates):
         return keep
-    tree = cKDTree(points[candidates], balanced_tree=False, compact_nodes=False)
+    tree = cKDTree(points[candidates], leafsize=128, balanced_tree=False, compact_nodes=False)
     near = tree.query_ball_point(centers, reach, return_sorted=False)
     counts = [len(n) for n in near]
     total = sum(counts)

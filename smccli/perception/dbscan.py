@@ -59,7 +59,8 @@ def dbscan_labels(points: np.ndarray, eps: float, min_points: int) -> np.ndarray
     cores = np.flatnonzero(core)
     if len(cores) == 0:
         return labels
-    both = core[a] & core[b]
+    core_a, core_b = core[a], core[b]
+    both = core_a & core_b
     _, component = connected_components(_graph(a[both], b[both], n), directed=False)
     # Number the components holding core points by their lowest core index.
     first = np.full(component.max() + 1, n)
@@ -69,7 +70,7 @@ def dbscan_labels(points: np.ndarray, eps: float, min_points: int) -> np.ndarray
     number[seeded[np.argsort(first[seeded])]] = np.arange(len(seeded))
     labels[cores] = number[component[cores]]
     # Border points: the lowest number among the clusters of their core neighbours.
-    a_core, b_core = core[a] & ~core[b], ~core[a] & core[b]
+    a_core, b_core = core_a & ~core_b, ~core_a & core_b
     border = np.concatenate([b[a_core], a[b_core]])
     reached_from = np.concatenate([a[a_core], b[b_core]])
     lowest = np.full(n, n, dtype=np.int64)
