@@ -10,6 +10,7 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
 
+from smccli.perception.moments import moments
 from smccli.perception.params import PerceptionParams
 from smccli.world.sensors import CameraFrame, RobotGeometry
 
@@ -376,19 +377,13 @@ def _refine_plane(
     trees).
     """
     for _ in range(10):
-        # The inliers and their running sum in scratch arrays: fresh 1.4 MB ones are fresh
+        # The inliers and their centred copy in scratch arrays: fresh 1.4 MB ones are fresh
         # pages, ~1 ms of a decision on this machine.
         k = int(np.count_nonzero(mask))
         inl, centered = _scratch("plane", (k, 3)), _scratch("plane_centered", (k, 4))
         np.compress(mask, points, axis=0, out=inl)
-        # ``inl.mean(axis=0)`` sums each column row after row, as ``einsum("ni->i")`` does
-        # (its three sums interleaved, row by row): the same mean to the bit, 0.9 to 0.2 ms
-        # on a table's 60 k points.
-        mean = np.einsum("ni->i", inl) / len(inl)
-        for i in range(3):  # column by column: (k, 3) - (3,) loops over rows of 3, 3 times slower
-            np.subtract(inl[:, i], mean[i], out=centered[:, i])
-        centered[:, 3] = centered[:, 0]
-        _, vecs = np.linalg.eigh(_scatter(centered))
+        mean, cov = moments(inl, centered)
+        _, vecs = np.linalg.eigh(cov)
         normal = vecs[:, 0] if vecs[2, 0] > 0 else -vecs[:, 0]
         plane = np.r_[normal, -float(np.dot(normal, mean))]
         dist = plane_distance(points, plane)
@@ -397,21 +392,6 @@ def _refine_plane(
             return plane, True, dist
         mask = new_mask
     return plane, False, dist
-
-
-def _scatter(c: np.ndarray) -> np.ndarray:
-    """``np.einsum("ni,nj->ij", c[:, :3], c[:, :3])`` (3, 3) of rows ``c`` (k, 4) float64
-    whose last column repeats the first, to the bit.
-
-    That einsum sums each of its nine products row after row (sequentially); so does
-    ``einsum("ni,ni->i")`` over three columns at once, and a product's two orders give the
-    same bits: the squares, then (with the repeated column) ``c0 c1, c1 c2, c2 c0``, its
-    six distinct sums in two passes, 0.9 to 0.55 ms on a table's 60 k points (equal on
-    3000 random sizes and every campaign frame tried; over one column alone einsum sums
-    in SIMD lanes, another order)."""
-    d = np.einsum("ni,ni->i", c[:, 0:3], c[:, 0:3])  # c0 c0, c1 c1, c2 c2
-    o = np.einsum("ni,ni->i", c[:, 0:3], c[:, 1:4])  # c0 c1, c1 c2, c2 c0
-    return np.array([[d[0], o[0], o[2]], [o[0], d[1], o[1]], [o[2], o[1], d[2]]])
 
 
 _TABLES: dict[bytes, np.ndarray] = {}
