@@ -61,14 +61,15 @@ def _lift(
     max_depth: float,
     region: tuple[int, int, int, int] | None,
     box: tuple[tuple[float, ...], tuple[float, ...]] | None = None,
+    base: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`points_from_depth` with each point's row-major pixel index (n,) int64 in
     place of its colour: the depth alone is read, and the colours of the points kept at
     the end are gathered then (:func:`pixel_colours`; a frame's colours may still be
     drawing, :class:`~smccli.world.sensors.DrawingFrame`). With ``box`` (lo, hi), each
-    (3,) [m] in the world frame, only the points inside it (:func:`crop_mask`'s test, on
-    the same values): the crop made on the coordinates' columns before they are
-    interleaved."""
+    (3,) [m] in the world frame (with ``base`` ``[x, y, yaw]``, the base's), only the
+    points inside it (:func:`crop_mask`'s test, on the same values): the crop made on the
+    coordinates' columns before they are interleaved."""
     depth = np.asarray(frame.depth, dtype=np.float32)
     h, w = depth.shape
     K = np.asarray(frame.K, dtype=np.float64)
@@ -116,7 +117,7 @@ def _lift(
     lo, hi = box
     # The kept columns gathered by their indices, found once: three ``np.compress`` each
     # found them again (0.3 to 0.2 ms for 67 k points).
-    kept = np.flatnonzero(_in_box(world, lo, hi))
+    kept = np.flatnonzero(_in_box(world if base is None else _base_columns(world, base), lo, hi))
     points = np.empty((len(kept), 3))
     for i in range(3):
         points[:, i] = world[i].take(kept)
@@ -224,11 +225,17 @@ def in_crop_frame(
     points)."""
     if params.crop_frame != "base":
         return points
+    return np.column_stack(_base_columns(points.T, base))
+
+
+def _base_columns(columns: np.ndarray, base: np.ndarray | None) -> list[np.ndarray]:
+    """The coordinates' columns (3, n) [m] of points in odometry's frame, in the frame of
+    the base at ``base`` ``[x, y, yaw]``: three columns (n,)."""
     if base is None:
         raise ValueError("perception.crop_frame=base needs the base's pose")
     c, s = np.cos(base[2]), np.sin(base[2])
-    dx, dy = points[:, 0] - base[0], points[:, 1] - base[1]
-    return np.column_stack([c * dx + s * dy, -s * dx + c * dy, points[:, 2]])
+    dx, dy = columns[0] - base[0], columns[1] - base[1]
+    return [c * dx + s * dy, -s * dx + c * dy, columns[2]]
 
 
 def crop_mask(
@@ -241,7 +248,9 @@ def crop_mask(
     return _in_box(points.T, lo, hi)
 
 
-def _in_box(columns: np.ndarray, lo: Sequence[float], hi: Sequence[float]) -> np.ndarray:
+def _in_box(
+    columns: np.ndarray | Sequence[np.ndarray], lo: Sequence[float], hi: Sequence[float]
+) -> np.ndarray:
     """Points inside the box ``lo``..``hi`` (3,) [m], bounds included, boolean mask (n,) of
     the points given as their coordinates' columns (3, n) (``points.T`` is a view)."""
     # Column by column: the (n, 3) comparisons and their ``all`` took 8 times as long.
@@ -249,23 +258,6 @@ def _in_box(columns: np.ndarray, lo: Sequence[float], hi: Sequence[float]) -> np
     for k in (1, 2):
         keep &= (columns[k] >= lo[k]) & (columns[k] <= hi[k])
     return keep
-
-
-def crop_faces(points: np.ndarray, lo: np.ndarray, hi: np.ndarray, touch: float) -> list[str]:
-    """Faces of the box ``lo``..``hi`` that ``points`` (n, 3), in the box's frame, come
-    within ``touch`` of: ``x_min``, ``x_max``, ``y_min``, ``y_max``, ``z_min``, ``z_max``."""
-    if not len(points):
-        return []
-    # Column by column: the same extremes, a third of the (n, 3) reductions' time.
-    low = [float(points[:, k].min()) for k in range(3)]
-    high = [float(points[:, k].max()) for k in range(3)]
-    faces = []
-    for k, axis in enumerate("xyz"):
-        if low[k] - lo[k] <= touch:
-            faces.append(f"{axis}_min")
-        if hi[k] - high[k] <= touch:
-            faces.append(f"{axis}_max")
-    return faces
 
 
 def self_filter_mask(points: np.ndarray, robot: RobotGeometry | None) -> np.ndarray:
@@ -533,11 +525,11 @@ def object_pixels_on_planes(
     """:func:`object_points_on_planes` from the depth alone: each point's row-major pixel
     index (n,) int64 (the table's (m,)) in place of its colour (:func:`pixel_colours`)."""
     region = crop_region(frame, params, base)
-    if params.crop_frame == "base":
-        points, pixels = _lift(frame, params.max_depth, region)
-        points, pixels = _kept(crop_mask(points, params, base), points, pixels)
-    else:  # the crop made in the lift: 0.5 ms less than on the lifted (n, 3) points
-        points, pixels = _lift(frame, params.max_depth, region, (params.crop_min, params.crop_max))
+    # The crop made in the lift: 0.5 ms less than on the lifted (n, 3) points (a mobile
+    # manipulator's box in its base's frame: 1.9 to 1.0 ms).
+    box = (params.crop_min, params.crop_max)
+    on_base = params.crop_frame == "base"
+    points, pixels = _lift(frame, params.max_depth, region, box, base if on_base else None)
     points, pixels = voxel_downsample(points, pixels, params.voxel_size)
     table = (np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
     if params.remove_walls:

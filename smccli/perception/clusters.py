@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 
 from smccli.errors import TreeError
 from smccli.perception.brightness import relative_brightness, side_points
-from smccli.perception.cloud import crop_faces, heights_above, in_crop_frame
+from smccli.perception.cloud import heights_above, in_crop_frame
 from smccli.perception.histogram import hsv_histogram
 from smccli.perception.params import PerceptionParams
 from smccli.perception.segment import Segmentation, segment_frame, standing_clusters, support_of
@@ -68,6 +68,23 @@ class Cluster:
     def location(self) -> np.ndarray:
         """``[x, y, z, yaw]``, shape (4,) [m, m, m, rad]."""
         return np.r_[self.centroid, self.yaw]
+
+
+def crop_faces(points: np.ndarray, lo: np.ndarray, hi: np.ndarray, touch: float) -> list[str]:
+    """Faces of the box ``lo``..``hi`` that ``points`` (n, 3), in the box's frame, come
+    within ``touch`` of: ``x_min``, ``x_max``, ``y_min``, ``y_max``, ``z_min``, ``z_max``."""
+    if not len(points):
+        return []
+    # Column by column: the same extremes, a third of the (n, 3) reductions' time.
+    low = [float(points[:, k].min()) for k in range(3)]
+    high = [float(points[:, k].max()) for k in range(3)]
+    faces = []
+    for k, axis in enumerate("xyz"):
+        if low[k] - lo[k] <= touch:
+            faces.append(f"{axis}_min")
+        if hi[k] - high[k] <= touch:
+            faces.append(f"{axis}_max")
+    return faces
 
 
 def outside_hull(xy: np.ndarray, hull: np.ndarray) -> np.ndarray:
