@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 
 from smccli.errors import TreeError
 from smccli.perception.brightness import relative_brightness, side_points
-from smccli.perception.cloud import crop_faces, heights_above, in_crop_frame
+from smccli.perception.cloud import heights_above, in_crop_frame
 from smccli.perception.histogram import hsv_histogram
 from smccli.perception.params import PerceptionParams
 from smccli.perception.segment import Segmentation, segment_frame, standing_clusters, support_of
@@ -70,6 +70,23 @@ class Cluster:
         return np.r_[self.centroid, self.yaw]
 
 
+def crop_faces(points: np.ndarray, lo: np.ndarray, hi: np.ndarray, touch: float) -> list[str]:
+    """Faces of the box ``lo``..``hi`` that ``points`` (n, 3), in the box's frame, come
+    within ``touch`` of: ``x_min``, ``x_max``, ``y_min``, ``y_max``, ``z_min``, ``z_max``."""
+    if not len(points):
+        return []
+    # Column by column: the same extremes, a third of the (n, 3) reductions' time.
+    low = [float(points[:, k].min()) for k in range(3)]
+    high = [float(points[:, k].max()) for k in range(3)]
+    faces = []
+    for k, axis in enumerate("xyz"):
+        if low[k] - lo[k] <= touch:
+            faces.append(f"{axis}_min")
+        if hi[k] - high[k] <= touch:
+            faces.append(f"{axis}_max")
+    return faces
+
+
 def outside_hull(xy: np.ndarray, hull: np.ndarray) -> np.ndarray:
     """How far points (n, 2) lie outside a convex polygon ``hull`` (k, 2), shape (n,) [m].
 
@@ -85,10 +102,13 @@ def outside_hull(xy: np.ndarray, hull: np.ndarray) -> np.ndarray:
     normals[inner > 0] *= -1
     # The two products of each (point, edge) and their sum, as ``np.einsum("kj,nkj->nk",
     # normals, xy[:, None, :] - hull[None])`` makes them (a sum of two is the same either
-    # way round), without the (n, k, 2) differences: 0.7 to 0.45 ms for 3 k points.
-    out = (xy[:, 0:1] - hull[:, 0]) * normals[:, 0]
-    out += (xy[:, 1:2] - hull[:, 1]) * normals[:, 1]
-    return np.max(out, axis=1)
+    # way round), without the (n, k, 2) differences: 0.7 to 0.45 ms for 3 k points; laid
+    # out (k, n), edge by edge, the largest is taken across rows, not along rows of ~15:
+    # 0.15 to 0.05 ms for a decision's 600.
+    x, y = xy[:, 0].copy(), xy[:, 1].copy()
+    out = (x - hull[:, 0:1]) * normals[:, 0:1]
+    out += (y - hull[:, 1:2]) * normals[:, 1:2]
+    return np.max(out, axis=0)
 
 
 def _outside_top(xy: np.ndarray, top: np.ndarray) -> np.ndarray:

