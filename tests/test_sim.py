@@ -313,3 +313,21 @@ def test_a_frame_read_late_holds_the_instant_it_was_drawn_to_the_bit() -> None:
     assert not np.array_equal(later.rgb, expected[-1])
     renderer.close()
     sim.close()
+
+
+def test_an_empty_noisy_window_reads_nothing_and_draws_as_a_frame() -> None:
+    """A noisy camera's look at an empty window: no reading, and the generator draws as
+    for a whole frame (the next frame is the same as after one)."""
+    scene = load_scene(
+        Path(__file__).parent.parent / "smccli/bench/scenes/bench_pick_realistic/scene.yaml"
+    )
+    sim = Sim(scene)
+    after = []
+    for look in (None, (10, 10, 5, 50)):
+        sim.reset(noise_seed=5)
+        first = sim.render_camera(look)
+        after.append(sim.render_camera())
+    assert not first.depth.any() and not first.rgb.any()
+    assert np.array_equal(after[0].depth, after[1].depth)
+    assert np.array_equal(after[0].rgb, after[1].rgb)
+    sim.close()

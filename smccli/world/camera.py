@@ -89,6 +89,7 @@ class CameraRenderer:
         """Draw the lit pass of the whole image (``region`` None) or of a window, without
         waiting for it; the function returned reads it back once (RGB (h, w, 3) uint8,
         black outside the window) and is this renderer's pending read until then."""
+        black = np.zeros((self.height, self.width, 3), dtype=np.uint8)
         if region is None:
             r = self._ready()
             r.update_scene(data, camera=self.cam_id, scene_option=self._option())
@@ -96,18 +97,18 @@ class CameraRenderer:
             mujoco.mjr_render(r._rect, r.scene, r._mjr_context)
             rect, (v0, v1, u0, u1) = r._rect, (0, self.height, 0, self.width)
         else:
-            r, rect = self._draw_window(data, region, segment=False)
             v0, v1, u0, u1 = region
+            if v1 <= v0 or u1 <= u0:  # an empty window: nothing to draw
+                return lambda: black
+            r, rect = self._draw_window(data, region, segment=False)
         gl_platform.PLATFORM.GL.glFlush()  # start drawing now, not at the read
         rgb: list[np.ndarray] = []
 
         def fetch() -> np.ndarray:
             if not rgb:
                 self._pending = None
-                out = np.zeros((self.height, self.width, 3), dtype=np.uint8)
-                if v1 > v0 and u1 > u0:
-                    out[v0:v1, u0:u1] = self._read_window(r, rect, segment=False)
-                rgb.append(out)
+                black[v0:v1, u0:u1] = self._read_window(r, rect, segment=False)
+                rgb.append(black)
             return rgb[0]
 
         self._pending = fetch
