@@ -429,10 +429,15 @@ class RobotSensors:
         return got
 
     def render_camera(
-        self, region: tuple[int, int, int, int] | None = None, colour: bool = True
+        self,
+        region: tuple[int, int, int, int] | None = None,
+        colour: bool = True,
+        *,
+        colour_later: bool = False,
     ) -> CameraFrame:
-        """The first colour image stamped at or after now, with its depth (``region`` and
-        ``colour`` are the simulator's rendering shortcuts: a camera gives whole frames)."""
+        """The first colour image stamped at or after now, with its depth (``region``,
+        ``colour`` and ``colour_later`` are the simulator's rendering shortcuts: a camera
+        gives whole frames, their colours received)."""
         self._fresh(lambda: self.inbox.color, f"colour image on {self.map.topics['color']}")
         stamp = self.inbox.color[-1][0]
         frame_id = self.inbox.color[-1][1]
