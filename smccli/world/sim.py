@@ -503,20 +503,18 @@ class Sim:
         the bit, its colours too but for a rare pixel on an edge, and every later draw is
         the same (:meth:`NoisySensors.frame`). Without ``colour`` a camera without noise
         draws the window's depth alone (its image black).
-        With ``colour_later`` a whole frame of a camera without noise is a
-        :class:`~smccli.world.sensors.DrawingFrame`: its colours are drawn while the caller
-        works on its depth, and read at their first use, in this thread. A noisy camera's
-        colours are drawn while its noise is drawn (:meth:`NoisySensors.draws`).
+        With ``colour_later`` a whole frame without noise is a
+        :class:`~smccli.world.sensors.DrawingFrame` (its colours drawn while the caller
+        works on its depth, read at their first use, in this thread); a noisy camera's are
+        drawn while its noise is drawn (:meth:`NoisySensors.draws`).
         """
         cam, noise = self._camera, self.sensor_noise
         K, T = self.camera_matrix(), self.camera_pose()
         if region is not None and self.camera_windows:
             rgb, depth = cam.region(self.data, region, colour)
             return CameraFrame(self.t, rgb, depth, K, T)
-        if region is None:
-            fetch, depth = cam.render(self.data)
-        else:
-            fetch, depth = cam.colour_region(self.data, region)
+        drawn = cam.render(self.data) if region is None else cam.colour_region(self.data, region)
+        fetch, depth = drawn
         if self.camera_windows:
             if colour_later:
                 return DrawingFrame(self.t, None, depth, K, T, fetch=fetch)
