@@ -154,15 +154,10 @@ def test_bands() -> None:
     assert s["overall"]["failures"] == {"grasp_missed": 1}
 
 
-def test_two_trials_end_to_end_on_any_number_of_workers(tmp_path) -> None:
+def test_two_trials_end_to_end_on_any_number_of_workers(clumsy_tree_0) -> None:
     """One clumsy demonstration recorded and compiled, two trials each on one and on two
     workers: every row is the episode's verdict on its own draw, the same either way."""
-    from smccli.bench.learning import record_demos
-    from smccli.learn.compile import compile_logs
-
-    logs = record_demos(tmp_path, 1, first=0)
-    tree = tmp_path / "tree.json"
-    compile_logs(logs, tree, rebuild=True)
+    tree = clumsy_tree_0
     threshold = [0.25, 0.35, 0.41]
     one = la.run_trials(tree, 0, [0, 2], 1, threshold)
     two = la.run_trials(tree, 0, [0, 2], 2, threshold)

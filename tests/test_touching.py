@@ -6,7 +6,6 @@ look-alike family's trials (development seed 0); ground truth only in assertions
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -65,15 +64,9 @@ def test_a_piece_of_the_merged_cluster_is_the_white_box(whole, tmp_path):
                 assert d_cluster(c, view, params) >= T_HP, f"trial {i}: {c.centroid}"
 
 
-def test_touching_trials_that_stopped_now_succeed(tmp_path) -> None:
+def test_touching_trials_that_stopped_now_succeed(clumsy_tree_0) -> None:
     """One clumsy demonstration recorded and compiled; two touching trials that stopped
     with ``no_contingent_smc`` run end to end and put the white box in the orange box."""
-    from smccli.bench.learning import record_demos
-    from smccli.learn.compile import compile_logs
-
-    logs = record_demos(tmp_path, 1, first=0)
-    tree = tmp_path / "tree.json"
-    compile_logs(logs, tree, rebuild=True)
-    rows = la.run_trials(Path(tree), 0, TOUCHING[1:], 1, [0.25, 0.35, 0.41])
+    rows = la.run_trials(clumsy_tree_0, 0, TOUCHING[1:], 1, [0.25, 0.35, 0.41])
     for row in rows:
         assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"

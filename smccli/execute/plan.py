@@ -88,6 +88,9 @@ class Plan:
     """The object an arm's goal was mapped on (a goal in its frame), where the decision saw
     it: the executor looks for it again while the action runs
     (:meth:`~smccli.execute.policy.TreePolicy.look_again`)."""
+    grasp_shift: float = 0.0
+    """How far the grasp was moved along the goal's x from the demonstrated one, where its
+    fingers had room (:mod:`smccli.execute.grasp`) [m]; a goal mapped again keeps it."""
 
     @property
     def midway(self) -> bool:
@@ -114,12 +117,15 @@ def rolled_out(
     base: tuple[np.ndarray, np.ndarray] | None = None,
     scan_alignment: np.ndarray | None = None,
     cluster: Cluster | None = None,
+    opening: float | None = None,
+    grasp_shift: float = 0.0,
 ) -> Plan:
     """The plan that runs ``action`` of ``edge`` from ``start`` to the mapped ``goal``
     ``[x, y, z, yaw]``: its DMP rolled out over :func:`action_duration` at
     ``control_period`` [s], the gripper's switch placed at its phase. ``base``: a mobile
     manipulator's base (now, goal) ``[x, y, 0, yaw]`` when the action drives it too;
-    ``scan_alignment`` and ``cluster`` as :class:`Plan` holds them."""
+    ``scan_alignment``, ``cluster`` and ``grasp_shift`` as :class:`Plan` holds them;
+    ``opening``: the fingers' opening on the way [0-1] instead of the demonstrated one."""
     duration = action_duration(action, start, goal)
     n_steps = max(2, round(duration / control_period)) + 1
     times, poses = rollout(action.dmp, start=start, goal=goal, duration=duration, n_steps=n_steps)
@@ -129,6 +135,9 @@ def rolled_out(
             action.base_dmp, start=base[0], goal=base[1], duration=duration, n_steps=n_steps
         )
     n = len(poses)
+    # Closed means squeeze; open as demonstrated (fingers opened only part way past a
+    # door's edge onto its handle), or as the fingers' room allows.
+    start_grip = float(action.gripper_start) if action.gripper_start >= 0.5 else 0.0
     switch: int | None = None
     if action.event != "none":
         # A switch inside the fragment (e.g. grasp, then lift) comes at its phase (never
@@ -141,9 +150,7 @@ def rolled_out(
         goal=goal,
         times=times,
         poses=poses,
-        # Closed means squeeze; open as demonstrated (fingers opened only part way past a
-        # door's edge onto its handle).
-        gripper_start=float(action.gripper_start) if action.gripper_start >= 0.5 else 0.0,
+        gripper_start=opening if opening is not None else start_grip,
         gripper_end=float(action.gripper_end) if action.gripper_end >= 0.5 else 0.0,
         switch_index=switch,
         gripper_switch=None if switch is None else float(times[switch]),
@@ -153,4 +160,5 @@ def rolled_out(
         poi=action.poi,
         base_poses=base_poses,
         cluster=cluster,
+        grasp_shift=grasp_shift,
     )

@@ -33,14 +33,16 @@ import numpy as np
 
 from smccli.errors import SmcError, TreeError
 from smccli.execute.decision import Candidate, Decision
+from smccli.execute.grasp import FingerColumns, clear_grasp, finger_columns, others, shifted
 from smccli.execute.looking import find_again
 from smccli.execute.matching import EdgeStack, equivalent, match_arm, match_base, match_edges
 from smccli.execute.observation import Observation
-from smccli.execute.plan import STOPS, Plan, action_duration, rolled_out
+from smccli.execute.plan import MIDWAY_PHASE, STOPS, Plan, action_duration, rolled_out
 from smccli.learn import frames
 from smccli.learn.smc import Action
 from smccli.learn.tree import ROOT, Edge, Tree
 from smccli.perception import Cluster
+from smccli.perception.cloud import object_points
 from smccli.world.controller import CartesianController, reach_problem
 from smccli.world.geometry import between
 from smccli.world.robot import Robot
@@ -96,6 +98,10 @@ class TreePolicy:
         """At a base's decision: each matched edge's scan alignment T (3, 3)."""
         self._nodes: tuple[str, ...] = (ROOT,)
         self._controller: CartesianController | None = None
+        self._fingers: FingerColumns | None = None
+        self._held_shift = 0.0
+        """How far from the demonstrated grasp the hand holds what it grasped, along its x
+        [m]: every goal until it lets go moves with it (:mod:`~smccli.execute.grasp`)."""
 
     # --- the frontier ----------------------------------------------------------------------
 
@@ -116,6 +122,7 @@ class TreePolicy:
             raise SmcError(f"the tree has no node {node!r}")
         self._nodes = (node,)
         self._scan_alignment = {}
+        self._held_shift = 0.0
 
     def edge(self, edge_id: str) -> Edge:
         """The tree's edge ``edge_id`` (its SMC: perception and action)."""
@@ -149,6 +156,8 @@ class TreePolicy:
         self._nodes = tuple(
             e.child for e in siblings if e is edge or equivalent(e, edge, self.params)
         )
+        if plan.event in ("close", "open"):
+            self._held_shift = plan.grasp_shift if plan.event == "close" else 0.0
 
     # --- a decision point -----------------------------------------------------------------
 
@@ -203,6 +212,16 @@ class TreePolicy:
                 f"yaw {goal[3]:.2f} rad is out of reach: {problem}",
             )
         base = None if base_goal is None or base_now is None else (base_now, base_goal)
+        opening, shift = None, 0.0
+        if self._grasps_on(a, cluster) and obs.camera is not None and cluster is not None:
+            goal, opening, shift = self._room_for_fingers(obs, a, goal, cluster)
+            dec = replace(dec, mapped_goal=goal)
+        elif self._held_shift and a.poi is None and a.goal_frame in ("object", "world"):
+            # What the hand holds sits that much off where the demonstration held it: the
+            # hand goes that much further, so the object ends where it was taught to.
+            shift = self._held_shift
+            goal = shifted(goal, shift)
+            dec = replace(dec, mapped_goal=goal)
         return rolled_out(
             dec,
             edge.id,
@@ -213,7 +232,39 @@ class TreePolicy:
             base=base,
             scan_alignment=self._scan_alignment.get(edge.id) if a.goal_frame == "scan" else None,
             cluster=cluster if a.goal_frame == "object" and a.poi is None else None,
+            opening=opening,
+            grasp_shift=shift,
         )
+
+    def _grasps_on(self, action: Action, cluster: Cluster | None) -> bool:
+        """Whether ``action`` closes an arm's gripper on ``cluster`` at its goal, the
+        fingers opened before: a grasp whose fingers need room (:mod:`~smccli.execute.grasp`)."""
+        return (
+            cluster is not None
+            and self.model is not None
+            and self.robot.gripper is not None
+            and action.poi is None
+            and action.event == "close"
+            and action.goal_frame == "object"
+            and action.gripper_phase >= MIDWAY_PHASE
+            and action.gripper_start >= 0.5
+        )
+
+    def _room_for_fingers(
+        self, obs: Observation, action: Action, goal: np.ndarray, cluster: Cluster
+    ) -> tuple[np.ndarray, float, float]:
+        """The grasp ``goal`` moved, and the fingers' opening, where the decision's cloud
+        leaves its fingers room (:func:`~smccli.execute.grasp.clear_grasp`)."""
+        assert self.model is not None and obs.camera is not None
+        if self._fingers is None:
+            self._fingers = finger_columns(self.model, self.robot)
+        opening = float(action.gripper_start)
+        if self._fingers is None:
+            return goal, opening, 0.0
+        points, _, _ = object_points(
+            obs.camera, obs.robot_geometry, self.params.perception, obs.base
+        )
+        return clear_grasp(goal, opening, cluster, others(points, cluster), self._fingers)
 
     def _base_now(self, obs: Observation, edge: Edge) -> np.ndarray | None:
         """A mobile manipulator's base now ``[x, y, 0, yaw]`` (its SMCs drive the hand or the
@@ -287,7 +338,7 @@ class TreePolicy:
         # the one the wrist reaches inside its limits), from where the action started.
         start = np.r_[plan.poses[0][:3], plan.goal[3]]
         goal = self.map_goal(edge.smc.action, c, start, edge.id, taught=taught)
-        return c, goal
+        return c, shifted(goal, plan.grasp_shift)  # the grasp's shift, as decided
 
     def map_goal(
         self,

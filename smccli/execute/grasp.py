@@ -1,0 +1,182 @@
+"""Room for the fingers: a grasp placed where its fingers can go down.
+
+A demonstrated grasp comes back in the object's frame (eq. 38-39): the fingers go down on
+either side of the object as they did in the demonstration, opened as wide as the operator
+opened them. Beside a neighbour, a finger may come down on it instead: measured on the
+look-alike family (docs/figures.md), every touching grasp that missed had a look-alike
+where a finger had to go. A person then grasps the object a little further along, or opens
+the hand less. So does this module, from what the robot sees and its own model only:
+
+- :func:`finger_columns` -- the fingers as boxes in the POI's frame at each opening, from
+  the robot's MJCF (their collision geoms with the finger joints at that opening);
+- :func:`clear_grasp` -- where the demonstrated grasp's finger columns hold points of
+  something else (the decision's cloud, less the grasped object), the nearest grasp along
+  the object (the POI's x) and the widest opening whose columns are empty; the
+  demonstrated one wherever it is empty, or where nothing is.
+
+The POI's frame: x its yaw axis (along which a finger is wide), y the closing axis, z the
+approach (down at a grasp); see docs/robots.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from smccli.perception import Cluster
+from smccli.world.robot import Robot
+from smccli.world.robot_model import subtree_bodies
+
+OPENINGS = np.linspace(1.0, 0.3, 15)
+"""Openings [0-1] tried, widest first (the demonstrated one is tried before them)."""
+STEP = 0.005
+"""Spacing of the grasps tried along the object [m]."""
+MAX_SHIFT = 0.05
+"""Farthest a grasp moves along the object from the demonstrated one [m]."""
+MARGIN = 0.005
+"""Room kept around a finger's column [m]: depth noise and the hand's tracking error."""
+GRIP_MARGIN = 0.008
+"""Least room between an open finger and the grasped object's side [m]."""
+ON_OBJECT = 0.01
+"""A moved grasp keeps its fingers this far inside the object's ends [m]."""
+MIN_POINTS = 3
+"""Points in a column that make it occupied (fewer: noise)."""
+ABOVE_TIP = 0.003
+"""Points lower than this above the fingertips' height at the grasp do not block it [m]
+(what is left of the table)."""
+
+
+@dataclass(frozen=True)
+class FingerColumns:
+    """A parallel gripper's fingers in the POI's frame, at each of ``openings``."""
+
+    openings: np.ndarray
+    """(k,) openings [0-1], descending."""
+    inner: np.ndarray
+    """(k,) nearest any finger comes to the POI along the closing axis (y) [m]: half the
+    room between the pads."""
+    outer: np.ndarray
+    """(k,) farthest any finger reaches along y [m]."""
+    half_width: float
+    """Half the fingers' extent along x [m]."""
+    tip: float
+    """How far the fingertips reach past the POI along the approach (z) [m]."""
+
+    def inner_at(self, opening: float) -> float:
+        """:attr:`inner` at ``opening`` (linear between the samples) [m]."""
+        return float(np.interp(opening, self.openings[::-1], self.inner[::-1]))
+
+    def outer_at(self, opening: float) -> float:
+        """:attr:`outer` at ``opening`` [m]."""
+        return float(np.interp(opening, self.openings[::-1], self.outer[::-1]))
+
+
+def finger_columns(model: mujoco.MjModel, robot: Robot) -> FingerColumns | None:
+    """The fingers of ``robot`` in ``model`` (a scene holding it) as boxes in the POI's
+    frame: the corners of their colliding geoms' bounding boxes with every finger joint at
+    each opening of :data:`OPENINGS`. None without a gripper."""
+    g = robot.gripper
+    if g is None:
+        return None
+    joints = [model.joint(n).id for n in g.joints]
+    bodies = subtree_bodies(model, {int(model.jnt_bodyid[j]) for j in joints})
+    geoms = [
+        i
+        for i in range(model.ngeom)
+        if int(model.geom_bodyid[i]) in bodies
+        and (model.geom_contype[i] or model.geom_conaffinity[i])
+    ]
+    if not geoms:
+        return None
+    site = model.site(robot.poi).id
+    data = mujoco.MjData(model)
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    inner, outer, half_width, tip = [], [], 0.0, -math.inf
+    for opening in OPENINGS:
+        for j in joints:
+            data.qpos[model.jnt_qposadr[j]] = g.closed + opening * (g.open - g.closed)
+        mujoco.mj_kinematics(model, data)
+        R_site = data.site_xmat[site].reshape(3, 3)
+        corners = []
+        for i in geoms:
+            centre, half = model.geom_aabb[i, :3], model.geom_aabb[i, 3:]
+            local = centre + signs * half
+            world = data.geom_xpos[i] + local @ data.geom_xmat[i].reshape(3, 3).T
+            corners.append((world - data.site_xpos[site]) @ R_site)
+        c = np.concatenate(corners)
+        inner.append(float(np.min(np.abs(c[:, 1]))) if np.ptp(np.sign(c[:, 1])) else 0.0)
+        outer.append(float(np.max(np.abs(c[:, 1]))))
+        half_width = max(half_width, float(np.max(np.abs(c[:, 0]))))
+        tip = max(tip, float(np.max(c[:, 2])))
+    return FingerColumns(OPENINGS.copy(), np.array(inner), np.array(outer), half_width, tip)
+
+
+def _corners(cluster: Cluster) -> np.ndarray:
+    """The cluster's footprint rectangle, (4, 2) [m]."""
+    hx, hy = cluster.extents[0] / 2, cluster.extents[1] / 2
+    c, s = math.cos(cluster.yaw), math.sin(cluster.yaw)
+    local = np.array([[hx, hy], [-hx, hy], [-hx, -hy], [hx, -hy]])
+    return local @ np.array([[c, s], [-s, c]]) + cluster.centroid[:2]
+
+
+def others(points: np.ndarray, target: Cluster, grow: float = MARGIN) -> np.ndarray:
+    """``points`` (n, 3) [m] outside the target's footprint grown by ``grow`` [m]: what
+    stands beside the object grasped."""
+    c, s = math.cos(target.yaw), math.sin(target.yaw)
+    d = points[:, :2] - target.centroid[:2]
+    along, across = d @ np.array([c, s]), d @ np.array([-s, c])
+    inside = (np.abs(along) <= target.extents[0] / 2 + grow) & (
+        np.abs(across) <= target.extents[1] / 2 + grow
+    )
+    return points[~inside]
+
+
+def clear_grasp(
+    goal: np.ndarray,
+    opening: float,
+    target: Cluster,
+    points: np.ndarray,
+    fingers: FingerColumns,
+) -> tuple[np.ndarray, float, float]:
+    """The grasp ``goal`` ``[x, y, z, yaw]`` (gripper down) with the fingers ``opening``
+    [0-1] on ``target``, moved where the finger columns are empty of ``points`` (n, 3)
+    [m], what stands beside it (:func:`others`). Returns (goal, opening, shift along the
+    POI's x [m]): the demonstrated ones where their columns are empty or where no grasp
+    tried is (the nearest shift first, and at each the widest opening)."""
+    yaw = float(goal[3])
+    ax, ay = np.array([math.cos(yaw), math.sin(yaw)]), np.array([-math.sin(yaw), math.cos(yaw)])
+    high = points[points[:, 2] > goal[2] - fingers.tip + ABOVE_TIP]
+    rel = high[:, :2] - goal[:2]
+    px, py = rel @ ax, np.abs(rel @ ay)
+    box = _corners(target) - goal[:2]
+    need = float(np.max(np.abs(box @ ay))) + GRIP_MARGIN
+    length = float(np.max(box @ ax) - np.min(box @ ax))
+    reach = min(MAX_SHIFT, max(0.0, length / 2 - fingers.half_width - ON_OBJECT))
+    steps = math.floor(reach / STEP + 1e-9)
+
+    def empty(shift: float, o: float) -> bool:
+        lo, hi = fingers.inner_at(o) - MARGIN, fingers.outer_at(o) + MARGIN
+        near = np.abs(px - shift) < fingers.half_width + MARGIN
+        return int(np.count_nonzero(near & (py > lo) & (py < hi))) < MIN_POINTS
+
+    if empty(0.0, opening):
+        return goal, opening, 0.0
+    openings = [opening] + [o for o in OPENINGS if o < opening]
+    shifts = sorted((STEP * k for k in range(-steps, steps + 1)), key=lambda v: (abs(v), v))
+    for shift in shifts:
+        for o in openings:
+            if fingers.inner_at(o) < need:
+                break
+            if empty(shift, o):
+                return shifted(goal, shift), float(o), shift
+    return goal, opening, 0.0
+
+
+def shifted(goal: np.ndarray, shift: float) -> np.ndarray:
+    """``goal`` ``[x, y, z, yaw]`` moved ``shift`` [m] along its own x (a new array)."""
+    moved = np.array(goal, dtype=float)
+    moved[:2] += shift * np.array([math.cos(moved[3]), math.sin(moved[3])])
+    return moved

@@ -1,0 +1,136 @@
+"""Room for the fingers (smccli/execute/grasp.py, issue 38): the fingers' columns from the
+robot's MJCF against the gripper as MuJoCo moves it; a grasp moved along the object, or
+opened less, only where a neighbour stands in a column; and the look-alike family's
+development trials whose finger came down on the look-alike, end to end."""
+
+from __future__ import annotations
+
+import math
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from smccli.bench import lookalike as la  # noqa: E402
+from smccli.execute.grasp import clear_grasp, finger_columns, others, shifted  # noqa: E402
+from smccli.perception import Cluster  # noqa: E402
+
+MISSED = (144, 172)
+"""Trials of development seed 0 whose grasp missed with a grey look-alike against the white
+box where a finger went down (docs/bench_lookalike.json at 7d5f948)."""
+
+
+@pytest.fixture(scope="module")
+def sim():
+    from smccli.world.sim import Sim
+
+    s = Sim(la.learning_scene())
+    yield s
+    s.close()
+
+
+def _pads(sim) -> tuple[float, float, float]:
+    """(inner, outer, tip) of the finger geoms in the POI's frame from MuJoCo's own poses
+    and sizes (box geoms): nearest and farthest along the closing axis y, deepest along z."""
+    m, d, robot = sim.model, sim.data, sim.robot
+    site = m.site(robot.poi).id
+    R, p = d.site_xmat[site].reshape(3, 3), d.site_xpos[site]
+    inner, outer, tip = math.inf, 0.0, -math.inf
+    for j in robot.gripper.joints:
+        body = m.jnt_bodyid[m.joint(j).id]
+        for g in range(m.body_geomadr[body], m.body_geomadr[body] + m.body_geomnum[body]):
+            assert m.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX
+            c = (d.geom_xpos[g] - p) @ R
+            axes = R.T @ d.geom_xmat[g].reshape(3, 3)  # the geom's axes in the POI frame
+            reach = np.abs(axes) @ m.geom_size[g]
+            inner = min(inner, abs(c[1]) - reach[1])
+            outer = max(outer, abs(c[1]) + reach[1])
+            tip = max(tip, c[2] + reach[2])
+    return inner, outer, tip
+
+
+def test_finger_columns_are_where_the_actuator_puts_the_fingers(sim) -> None:
+    """The arm's fingers commanded to openings through their actuator and left to settle:
+    the pads stand where the columns say, within half a millimetre."""
+    fingers = finger_columns(sim.model, sim.robot)
+    assert fingers is not None
+    g = sim.robot.gripper
+    act = sim.model.actuator(g.actuator).id
+    q = [sim.model.jnt_qposadr[sim.model.joint(j).id] for j in g.joints]
+    for opening in (1.0, 0.7, 0.45):
+        sim.data.ctrl[act] = g.target(opening)
+        for _ in range(800):
+            mujoco.mj_step(sim.model, sim.data)
+        now = g.opening(sim.data.qpos[q])
+        assert abs(now - opening) < 0.05
+        inner, outer, tip = _pads(sim)
+        assert fingers.inner_at(now) == pytest.approx(inner, abs=5e-4)
+        assert fingers.outer_at(now) == pytest.approx(outer, abs=5e-4)
+        assert fingers.tip == pytest.approx(tip, abs=5e-4)
+
+
+def _box(x: float, y: float, yaw: float, length: float = 0.14, width: float = 0.04) -> Cluster:
+    return Cluster(
+        centroid=np.array([x, y, 0.025]),
+        yaw=yaw,
+        yaw_period=math.pi,
+        extents=np.array([length, width, 0.05]),
+        histogram=np.ones(1),
+        n_points=500,
+    )
+
+
+def _slab(cluster: Cluster, rng, n: int = 400) -> np.ndarray:
+    """Points on the top and sides of a box cluster (n, 3) [m]."""
+    u = rng.uniform(-0.5, 0.5, (n, 2)) * cluster.extents[:2]
+    c, s = math.cos(cluster.yaw), math.sin(cluster.yaw)
+    xy = u @ np.array([[c, s], [-s, c]]) + cluster.centroid[:2]
+    return np.c_[xy, rng.uniform(0.005, cluster.extents[2], n)]
+
+
+def test_a_grasp_with_room_stays_as_demonstrated(sim, rng) -> None:
+    fingers = finger_columns(sim.model, sim.robot)
+    target = _box(0.5, 0.0, 0.3)
+    goal = np.array([0.5, 0.0, 0.02, 0.3])
+    far = _box(0.5, 0.25, 0.0)  # 25 cm away
+    points = others(np.r_[_slab(target, rng), _slab(far, rng)], target)
+    assert len(points) == 400  # the grasped object's own points are not in the way
+    moved, opening, shift = clear_grasp(goal, 1.0, target, points, fingers)
+    assert moved is goal and (opening, shift) == (1.0, 0.0)
+
+
+def test_a_neighbour_under_a_finger_moves_the_grasp_or_narrows_it(sim, rng) -> None:
+    fingers = finger_columns(sim.model, sim.robot)
+    target = _box(0.5, 0.0, 0.0)
+    goal = np.array([0.5, 0.0, 0.02, 0.0])  # fingers across the box's width, along y
+    # A cube 3 cm beside the long side, at one end: under the open finger (3-4.2 cm out).
+    cube = _box(0.5 + 0.035, 0.02 + 0.03 + 0.02, 0.0, 0.04, 0.04)
+    points = others(np.r_[_slab(target, rng), _slab(cube, rng)], target)
+    moved, opening, shift = clear_grasp(goal, 1.0, target, points, fingers)
+    # Narrowed: the fingers go down between the box and the cube, still clear of the box.
+    assert shift == 0.0 and opening < 1.0
+    assert fingers.outer_at(opening) < 0.02 + 0.03 and fingers.inner_at(opening) >= 0.028
+    # Flush against the long side at one end: no opening fits; the grasp moves away.
+    flush = _box(0.5 + 0.02, 0.02 + 0.02, 0.0, 0.05, 0.04)
+    points = others(np.r_[_slab(target, rng), _slab(flush, rng)], target)
+    moved, opening, shift = clear_grasp(goal, 1.0, target, points, fingers)
+    assert opening == 1.0 and -0.03 <= shift <= -0.02  # 2.5 cm: the sampled edge
+    assert moved == pytest.approx(shifted(goal, shift))
+    assert abs(shift) <= 0.07 - fingers.half_width - 0.01 + 1e-9  # the fingers stay on it
+    # Flush along the whole side: no grasp tried has room; the demonstrated one stays.
+    wall = _box(0.5, 0.04, 0.0, 0.16, 0.04)
+    points = others(np.r_[_slab(target, rng), _slab(wall, rng)], target)
+    moved, opening, shift = clear_grasp(goal, 1.0, target, points, fingers)
+    assert moved is goal and (opening, shift) == (1.0, 0.0)
+
+
+def test_missed_grasps_beside_a_lookalike_now_put_the_box_away(clumsy_tree_0) -> None:
+    """Development seed 0's trials whose finger came down on the look-alike touching the
+    white box: the grasp goes where the fingers have room, the box lands in the orange box."""
+    rows = la.run_trials(clumsy_tree_0, 0, MISSED, 1, [0.25, 0.35, 0.41])
+    for row in rows:
+        assert row["gap_m"] < 1e-4
+        assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"
