@@ -70,3 +70,24 @@ def test_touching_trials_that_stopped_now_succeed(clumsy_tree_0) -> None:
     rows = la.run_trials(clumsy_tree_0, 0, TOUCHING[1:], 1, [0.25, 0.35, 0.41])
     for row in rows:
         assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"
+
+
+def test_two_bars_at_an_angle_fall_apart_by_direction() -> None:
+    """Two 14 x 4 cm bars meeting end to end at 50 degrees (an L, as the look-alike family
+    draws them), their tops sampled every 4 mm: the local direction divides them."""
+    from smccli.perception.splits import MIN_DIRECTION_STEP, local_direction, otsu_split
+
+    u, v = np.meshgrid(np.arange(0.0, 0.14, 0.004), np.arange(-0.02, 0.02, 0.004))
+    bar = np.c_[u.ravel(), v.ravel()]
+    turn = np.radians(50)
+    rot = np.array([[np.cos(turn), np.sin(turn)], [-np.sin(turn), np.cos(turn)]])
+    other = bar @ rot + [0.14 + 0.02 * np.sin(turn), 0.0]
+    xy = np.r_[bar, other]
+    mask = otsu_split(local_direction(np.c_[xy, np.full(len(xy), 0.05)]), MIN_DIRECTION_STEP)
+    assert mask is not None
+    # Each bar's middle on its own side (a bar's last 2 cm look across it: pieces there
+    # are small, and the taught perception judges every piece).
+    middle = (u.ravel() > 0.02) & (u.ravel() < 0.12)
+    first, second = mask[: len(bar)][middle].mean(), mask[len(bar) :][middle].mean()
+    assert min(first, 1 - first) < 0.05 and min(second, 1 - second) < 0.05
+    assert abs(first - second) > 0.9

@@ -2,9 +2,10 @@
 
 Two objects standing closer than DBSCAN's reach (``dbscan_eps``) are one cluster: a white
 box with a grey box of its size against it reads as one 25 x 14 cm object, which matches
-no taught view. No geometry of the merged points says where one ends, but the objects
-differ in brightness or in height, even within one frame of a camera whose exposure and white
-balance drift: :func:`cluster_splits` divides each cluster by each of these
+no taught view. Where one ends shows in what differs between them: brightness or height
+(even within one frame of a camera whose exposure and white balance drift), or, for two
+bars meeting at an angle, the direction the footprint runs in around each point:
+:func:`cluster_splits` divides each cluster by each of these
 (:func:`split_masks`), keeps each side's connected pieces, and describes each piece as an
 object of its own (:func:`~smccli.perception.clusters.describe_points`). The SMC's taught
 perception then says whether a piece is the taught object
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 
 from smccli.perception.cloud import heights_above
@@ -32,6 +34,12 @@ so two objects of different heights fall apart by it."""
 MIN_STEP = 0.003
 """Smallest difference of the two sides' mean local top for a height split [m]: the
 depth camera's noise on a flat top is about 1 mm."""
+DIRECTION_RADIUS = 0.03
+"""Radius of the neighbourhood whose footprint gives a point's *local direction* [m]: half
+a box's width, so that across a bar's whole width the neighbourhood is longer along it."""
+MIN_DIRECTION_STEP = 20
+"""Smallest difference of the two sides' mean local direction for a direction split, on
+0-255 for a half turn (20: 14 degrees)."""
 MIN_BRIGHTNESS_STEP = 20
 """Smallest difference of the two sides' mean brightness for a brightness split (0-255):
 one object's top and sides differ by more, which is why every piece only ever is a
@@ -57,16 +65,43 @@ def split_masks(
 ) -> list[np.ndarray]:
     """Ways to divide one cluster's points (n, 3) [m] with colours (n, 3) uint8 in two,
     masks (n,): by brightness (max(R, G, B): a white box's clipped top against a grey
-    one's) and by each point's local top above ``plane`` (:data:`TOP_RADIUS`: one object
-    taller than the other). Chroma (max - min) divided none of the 46 merged white box
+    one's), by local direction (:func:`local_direction`: two bars at an angle) and by each
+    point's local top above ``plane`` (:data:`TOP_RADIUS`: one object taller than the
+    other). Chroma (max - min) divided none of the 46 merged white box
     and look-alike clusters of seed 0 usefully (docs/perception.md) and is left out."""
     masks = [otsu_split(colors.max(axis=1).astype(np.float64), MIN_BRIGHTNESS_STEP)]
+    masks.append(otsu_split(local_direction(points), MIN_DIRECTION_STEP))
     if plane is not None:
         h = heights_above(points, plane)
         near = cKDTree(points[:, :2]).query_ball_point(points[:, :2], TOP_RADIUS)
         top = np.array([h[j].max() for j in near])
         masks.append(otsu_split(top * 1000.0, MIN_STEP * 1000.0))  # in mm: 0-255
     return [m for m in masks if m is not None]
+
+
+def local_direction(points: np.ndarray) -> np.ndarray:
+    """Each point's local direction on 0-255 (n,): the longest axis of the footprint of its
+    :data:`DIRECTION_RADIUS` neighbourhood (points (n, 3) [m], x-y), as a doubled angle
+    from the cluster's mean one (a half turn is the same direction). Two bars touching end
+    to end at an angle (an L, a V) fall apart by it where brightness and height do not:
+    their tops clip alike, and a look-alike may be as tall."""
+    xy = points[:, :2] - points[:, :2].mean(axis=0)
+    n = len(xy)
+    pairs = cKDTree(xy).query_pairs(DIRECTION_RADIUS, output_type="ndarray")
+    i = np.r_[pairs[:, 0], pairs[:, 1], np.arange(n)]
+    j = np.r_[pairs[:, 1], pairs[:, 0], np.arange(n)]
+    # Neighbourhood sums of 1, x, y, x², xy, y² as one sparse product.
+    near = csr_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+    s = near @ np.c_[np.ones(n), xy, xy[:, 0] ** 2, xy[:, 0] * xy[:, 1], xy[:, 1] ** 2]
+    m = s[:, 0]
+    mx, my = s[:, 1] / m, s[:, 2] / m
+    a = s[:, 3] / m - mx * mx - (s[:, 5] / m - my * my)  # var(x) - var(y)
+    b = 2 * (s[:, 4] / m - mx * my)  # 2 cov(x, y)
+    doubled = np.arctan2(b, a)
+    weight = np.hypot(a, b)  # how elongated: a round neighbourhood has no direction
+    mean = np.arctan2((weight * np.sin(doubled)).sum(), (weight * np.cos(doubled)).sum())
+    off = np.angle(np.exp(1j * (doubled - mean)))  # (-pi, pi], the cut opposite the mean
+    return (off + np.pi) / (2 * np.pi) * 255.0
 
 
 def split_parts(
