@@ -22,6 +22,10 @@ TOUCHING = (35, 56, 90)
 """Trials of seed 0 whose grey look-alike (0.37, 0.58, 0.40) touches the white box (gap
 under 20 µm) and that stopped at the first decision with ``no_contingent_smc`` before
 splits (docs/bench_lookalike.json at c0757ca)."""
+ANGLED = (71,)
+"""Trial of seed 0 whose grey look-alike (0.63) meets the white box's end at an angle (an
+L, 0.6 mm apart) and that still stopped with splits by brightness and height alone (at
+7d5f948): the local direction divides them."""
 
 
 @pytest.fixture(scope="module")
@@ -65,9 +69,9 @@ def test_a_piece_of_the_merged_cluster_is_the_white_box(whole, tmp_path):
 
 
 def test_touching_trials_that_stopped_now_succeed(clumsy_tree_0) -> None:
-    """One clumsy demonstration recorded and compiled; two touching trials that stopped
-    with ``no_contingent_smc`` run end to end and put the white box in the orange box."""
-    rows = la.run_trials(clumsy_tree_0, 0, TOUCHING[1:], 1, [0.25, 0.35, 0.41])
+    """One clumsy demonstration recorded and compiled; touching trials that stopped with
+    ``no_contingent_smc`` run end to end and put the white box in the orange box."""
+    rows = la.run_trials(clumsy_tree_0, 0, TOUCHING[1:] + ANGLED, 1, [0.25, 0.35, 0.41])
     for row in rows:
         assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"
 
