@@ -27,6 +27,7 @@ import mujoco
 import numpy as np
 
 from smccli.perception import Cluster
+from smccli.world.geometry import compose, from_frame, to_frame
 from smccli.world.robot import Robot
 from smccli.world.robot_model import subtree_bodies
 
@@ -114,23 +115,16 @@ def finger_columns(model: mujoco.MjModel, robot: Robot) -> FingerColumns | None:
     return FingerColumns(OPENINGS.copy(), np.array(inner), np.array(outer), half_width, tip)
 
 
-def _corners(cluster: Cluster) -> np.ndarray:
-    """The cluster's footprint rectangle, (4, 2) [m]."""
-    hx, hy = cluster.extents[0] / 2, cluster.extents[1] / 2
-    c, s = math.cos(cluster.yaw), math.sin(cluster.yaw)
-    local = np.array([[hx, hy], [-hx, hy], [-hx, -hy], [hx, -hy]])
-    return local @ np.array([[c, s], [-s, c]]) + cluster.centroid[:2]
+def _frame(cluster: Cluster) -> np.ndarray:
+    """The cluster's footprint frame ``[x, y, yaw]``: its centre, x along its length."""
+    return np.array([cluster.centroid[0], cluster.centroid[1], cluster.yaw])
 
 
 def others(points: np.ndarray, target: Cluster, grow: float = MARGIN) -> np.ndarray:
     """``points`` (n, 3) [m] outside the target's footprint grown by ``grow`` [m]: what
     stands beside the object grasped."""
-    c, s = math.cos(target.yaw), math.sin(target.yaw)
-    d = points[:, :2] - target.centroid[:2]
-    along, across = d @ np.array([c, s]), d @ np.array([-s, c])
-    inside = (np.abs(along) <= target.extents[0] / 2 + grow) & (
-        np.abs(across) <= target.extents[1] / 2 + grow
-    )
+    local = to_frame(_frame(target), points[:, :2])
+    inside = np.all(np.abs(local) <= target.extents[:2] / 2 + grow, axis=1)
     return points[~inside]
 
 
@@ -146,14 +140,14 @@ def clear_grasp(
     [m], what stands beside it (:func:`others`). Returns (goal, opening, shift along the
     POI's x [m]): the demonstrated ones where their columns are empty or where no grasp
     tried is (the nearest shift first, and at each the widest opening)."""
-    yaw = float(goal[3])
-    ax, ay = np.array([math.cos(yaw), math.sin(yaw)]), np.array([-math.sin(yaw), math.cos(yaw)])
     high = points[points[:, 2] > goal[2] - fingers.tip + ABOVE_TIP]
-    rel = high[:, :2] - goal[:2]
-    px, py = rel @ ax, np.abs(rel @ ay)
-    box = _corners(target) - goal[:2]
-    need = float(np.max(np.abs(box @ ay))) + GRIP_MARGIN
-    length = float(np.max(box @ ax) - np.min(box @ ax))
+    px, py = to_frame(goal[[0, 1, 3]], high[:, :2]).T  # the POI's x and y at the grasp
+    py = np.abs(py)
+    half = target.extents[:2] / 2
+    corners = from_frame(_frame(target), half * [[1, 1], [-1, 1], [-1, -1], [1, -1]])
+    box = to_frame(goal[[0, 1, 3]], corners)
+    need = float(np.max(np.abs(box[:, 1]))) + GRIP_MARGIN
+    length = float(np.ptp(box[:, 0]))
     reach = min(MAX_SHIFT, max(0.0, length / 2 - fingers.half_width - ON_OBJECT))
     steps = math.floor(reach / STEP + 1e-9)
 
@@ -177,6 +171,4 @@ def clear_grasp(
 
 def shifted(goal: np.ndarray, shift: float) -> np.ndarray:
     """``goal`` ``[x, y, z, yaw]`` moved ``shift`` [m] along its own x (a new array)."""
-    moved = np.array(goal, dtype=float)
-    moved[:2] += shift * np.array([math.cos(moved[3]), math.sin(moved[3])])
-    return moved
+    return compose(goal, [shift, 0.0, 0.0, 0.0])

@@ -35,8 +35,10 @@ MIN_STEP = 0.003
 """Smallest difference of the two sides' mean local top for a height split [m]: the
 depth camera's noise on a flat top is about 1 mm."""
 DIRECTION_RADIUS = 0.03
-"""Radius of the neighbourhood whose footprint gives a point's *local direction* [m]: half
-a box's width, so that across a bar's whole width the neighbourhood is longer along it."""
+"""Radius of the neighbourhood whose footprint gives a point's *local direction* [m]: more
+than half a box's width, so that across a bar's whole width the neighbourhood is cut by
+its sides and runs along it (at 2 cm, half a 4 cm bar's width, the centre line's was a
+whole disc, with no direction)."""
 MIN_DIRECTION_STEP = 20
 """Smallest difference of the two sides' mean local direction for a direction split, on
 0-255 for a half turn (20: 14 degrees)."""
