@@ -142,3 +142,37 @@ def test_a_look_renders_a_small_part_of_the_image_and_sees_what_a_whole_frame_do
     box = min(pushed, key=lambda c: np.hypot(*(c.centroid[:2] - seen.centroid[:2])))
     assert abs(box.centroid[0] - seen.centroid[0] - 0.03) < 0.005
     sim.close()
+
+
+def test_what_the_hand_carries_is_in_the_way_only_between_the_camera_and_the_goal():
+    """looking.held_in_the_way: a carried box (a ball of its reach around the POI) above the
+    orange box stands in front of it in the camera's image; the same box above the white
+    box, half a table away, does not."""
+    from dataclasses import replace
+
+    from smccli.execute.looking import held_in_the_way
+    from smccli.execute.sensing import Sensors
+    from smccli.perception import PerceptionParams, clusters_from_frame
+    from smccli.perception.reach import workspace_box
+    from smccli.world.scene import load_scene
+
+    scene = load_scene("bench_pick")
+    sim = Sim(scene)
+    sensors = Sensors(sim)
+    truth = Truth(sim)
+    lo, hi = workspace_box(scene)
+    params = replace(PerceptionParams(), crop_min=lo, crop_max=hi)
+    clusters = clusters_from_frame(sensors.render_camera(), sensors.robot_geometry(), params)
+
+    def seen(name: str):
+        at = truth.object_pose(name)[:2]
+        return min(clusters, key=lambda c: np.hypot(*(c.centroid[:2] - at)))
+
+    goal, far = seen("orange_box"), seen("white_box")
+    assert np.hypot(*(goal.centroid[:2] - far.centroid[:2])) > 0.3
+    for lift in (0.05, 0.12, 0.2):
+        over_goal = np.r_[goal.centroid[:2], goal.centroid[2] + lift]
+        over_far = np.r_[far.centroid[:2], far.centroid[2] + lift]
+        assert held_in_the_way(sensors, goal, params, over_goal, 0.07)
+        assert not held_in_the_way(sensors, goal, params, over_far, 0.07)
+    sim.close()

@@ -35,6 +35,7 @@ from smccli.execute.looking import (
     LOOK_NEAR,
     LOOK_PERIOD,
     check_look_period,
+    held_in_the_way,
     look,
     look_crop,
     look_frame,
@@ -385,8 +386,9 @@ class TreeExecutor:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Stream ``path[1:k+1]`` (n, 4) of an arm's action on an object, looking at it
         again every ``look_period`` until the hand is within :data:`LOOK_NEAR` of where
-        it acts (then the hand hides it): where it moved, or is seen better, the goal moves
-        and the rest of the path with it (:func:`steer`). Returns (path, goal)."""
+        it acts (then the hand hides it), and not while what it holds is in the way: where
+        it moved, or is seen better, the goal moves and the rest of the path with it
+        (:func:`steer`). Returns (path, goal)."""
         s = self.sensors
         edge = self.policy.edge(plan.edge or "")
         seen = plan.cluster
@@ -405,6 +407,8 @@ class TreeExecutor:
                 continue
             next_look = s.t + self.look_period
             if np.linalg.norm(self._poi_now()[:3] - act[:3]) < LOOK_NEAR:
+                continue
+            if self._carried_in_the_way(seen):
                 continue
             looked = self._look(seen, track)
             if looked is None:
@@ -425,6 +429,17 @@ class TreeExecutor:
             path = steer(path, new, i)
             goal, act = new_goal, path[k].copy()
         return path, goal
+
+    def _carried_in_the_way(self, seen: Cluster) -> bool:
+        """What an arm's hand holds may hide ``seen`` from the camera
+        (:func:`~smccli.execute.looking.held_in_the_way`): a look would not tell what it hides
+        from a move."""
+        reach = self.policy.held_reach
+        if not reach or self.sensors.mobile_manipulator:
+            return False  # (a mobile manipulator's POI is in its base's frame)
+        return held_in_the_way(
+            self.sensors, seen, self.params.perception, self._poi_now()[:3], reach
+        )
 
     def _look(
         self, seen: Cluster, track: Track | None

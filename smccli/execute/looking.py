@@ -149,6 +149,33 @@ def _same_frame(a: CameraFrame, b: CameraFrame) -> bool:
     )
 
 
+def held_in_the_way(
+    sensors: Sensors, seen: Cluster, params: PerceptionParams, poi: np.ndarray, reach: float
+) -> bool:
+    """Whether what the hand holds, within ``reach`` [m] of the ``poi`` (x, y, z, world),
+    may stand between the camera and ``seen`` (its footprint's box): their images'
+    rectangles meet (:func:`~smccli.perception.cloud.view_region`). A look then sees part
+    of the object behind what the hand carries, which the self-filter does not remove: the
+    centre of a box carried over the box it goes in moved 3-4 cm with the part it hid
+    (development seed 2 of the look-alike family), though nothing moved."""
+    K, T, shape, near = sensors.camera_view()
+    half = float(np.hypot(*seen.extents[:2])) / 2
+    top = float(seen.centroid[2] + seen.extents[2] / 2)
+    lo = np.r_[seen.centroid[:2] - half, params.crop_min[2]]
+    hi = np.r_[seen.centroid[:2] + half, top]
+    boxes = ((lo, hi), (np.asarray(poi) - reach, np.asarray(poi) + reach))
+    rects = [
+        view_region(K, T, shape, near, replace(params, crop_min=tuple(a), crop_max=tuple(b)))
+        for a, b in boxes
+    ]
+    if any(r == (0, 0, 0, 0) for r in rects):
+        return False  # one of them is out of sight
+    if any(r is None for r in rects):
+        return True  # one of them fills the image
+    (v0, v1, u0, u1), (w0, w1, x0, x1) = rects  # type: ignore[misc]
+    return v0 < w1 and w0 < v1 and u0 < x1 and x0 < u1
+
+
 def find_again(
     taught: Cluster, seen: Cluster, clusters: Sequence[Cluster], params: SmcParams
 ) -> Cluster | None:

@@ -107,6 +107,33 @@ def action_duration(action: Action, start: np.ndarray, goal: np.ndarray) -> floa
     return max(MIN_DURATION, dmp.duration * scale, abs(goal[3] - start[3]) / MAX_YAW_RATE)
 
 
+def switch_index(action: Action, n: int) -> int | None:
+    """Index of the gripper's switch in a rollout of ``action`` of ``n`` poses: at its
+    phase when that comes before :data:`MIDWAY_PHASE` (e.g. grasp, then lift; never at
+    the last pose, which means at the goal), else at the goal; None without an event."""
+    if action.event == "none":
+        return None
+    if action.gripper_phase < MIDWAY_PHASE:
+        return min(int(round(action.gripper_phase * (n - 1))), n - 2)
+    return n - 1
+
+
+def switch_pose(
+    action: Action, start: np.ndarray, goal: np.ndarray, control_period: float
+) -> np.ndarray:
+    """Where the POI is ``[x, y, z, yaw]`` when the gripper switches in the rollout of
+    ``action`` from ``start`` to ``goal`` (:func:`rolled_out`'s): the goal itself unless
+    the switch comes midway."""
+    duration = action_duration(action, start, goal)
+    n_steps = max(2, round(duration / control_period)) + 1
+    if action.event == "none" or action.gripper_phase >= MIDWAY_PHASE:
+        return np.asarray(goal, dtype=float)
+    _, poses = rollout(action.dmp, start=start, goal=goal, duration=duration, n_steps=n_steps)
+    i = switch_index(action, len(poses))
+    assert i is not None
+    return poses[i]
+
+
 def rolled_out(
     decision: Decision,
     edge: str,
@@ -134,16 +161,10 @@ def rolled_out(
         _, base_poses = rollout(
             action.base_dmp, start=base[0], goal=base[1], duration=duration, n_steps=n_steps
         )
-    n = len(poses)
     # Closed means squeeze; open as demonstrated (fingers opened only part way past a
     # door's edge onto its handle), or as the fingers' room allows.
     start_grip = float(action.gripper_start) if action.gripper_start >= 0.5 else 0.0
-    switch: int | None = None
-    if action.event != "none":
-        # A switch inside the fragment (e.g. grasp, then lift) comes at its phase (never
-        # at the last pose, which means at the goal); else at the goal.
-        midway = action.gripper_phase < MIDWAY_PHASE
-        switch = min(int(round(action.gripper_phase * (n - 1))), n - 2) if midway else n - 1
+    switch = switch_index(action, len(poses))
     return Plan(
         decision=decision,
         edge=edge,
