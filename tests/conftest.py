@@ -168,6 +168,20 @@ def clumsy_tree_0(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def clumsy_tree_2(tmp_path_factory) -> Path:
+    """The look-alike family's tree on development seed 2: clumsy operator 2 closes the
+    gripper at 94 % of the grasp's fragment, then lifts (once per run)."""
+    from smccli.bench.learning import record_demos
+    from smccli.learn.compile import compile_logs
+
+    with built_once(tmp_path_factory, "clumsy-2") as (root, build):
+        tree = root / "tree.json"
+        if build:
+            compile_logs(record_demos(root, 1, first=2), tree, rebuild=True)
+    return tree
+
+
+@pytest.fixture(scope="session")
 def reseeded_logs(tmp_path_factory) -> dict[int, dict[str, list[Path]]]:
     """The sample scripts recorded again with seed 1 (tremor, hesitation, speed),
     each from its own random layout, as users record them (``--randomize``; once per run)."""

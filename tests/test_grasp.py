@@ -21,6 +21,10 @@ from smccli.perception import Cluster  # noqa: E402
 MISSED = (144, 172)
 """Trials of development seed 0 whose grasp missed with a grey look-alike against the white
 box where a finger went down (docs/bench_lookalike.json at 7d5f948)."""
+MISSED_MIDWAY = (90, 272)
+"""Trials of development seed 2 whose finger came down on the look-alike, the box then
+dropped: its demonstration closes the gripper at 94 % of the fragment, and the fingers'
+room was only looked for where they close at its end (69fbfe9)."""
 
 
 @pytest.fixture(scope="module")
@@ -133,4 +137,18 @@ def test_missed_grasps_beside_a_lookalike_now_put_the_box_away(clumsy_tree_0) ->
     rows = la.run_trials(clumsy_tree_0, 0, MISSED, 1, [0.25, 0.35, 0.41])
     for row in rows:
         assert row["gap_m"] < 1e-4
+        assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"
+
+
+def test_a_grasp_that_closes_before_the_fragment_ends_gets_room_too(clumsy_tree_2) -> None:
+    """Development seed 2's operator closes the gripper before the grasp's fragment ends:
+    where its finger came down on the look-alike, the fingers' room is now looked for where
+    they close, and the box lands in the orange box."""
+    from smccli.learn.tree import load_tree
+
+    grasp = next(e for e in load_tree(clumsy_tree_2).edges if e.smc.action.event == "close")
+    assert grasp.smc.action.gripper_phase < 0.95  # the close comes midway (plan.MIDWAY_PHASE)
+    rows = la.run_trials(clumsy_tree_2, 2, MISSED_MIDWAY, 1, [0.25, 0.35, 0.41])
+    for row in rows:
+        assert row["gap_m"] < 0.03
         assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"
