@@ -179,12 +179,13 @@ def test_what_the_hand_carries_is_in_the_way_only_between_the_camera_and_the_goa
 
 
 def test_a_box_carried_over_the_orange_box_does_not_move_its_goal(clumsy_tree_2):
-    """Development seed 2's trials 239 and 246: looking again while the white box is carried
+    """Development seed 2's trials 246 and 239: looking again while the white box is carried
     over the orange box saw the orange box's centre 3-4 cm off (the carried box hid part of
-    it) and placed the box on its rim (69fbfe9). Looks are skipped while the carried box is
-    in the way, and the box lands inside."""
+    it) and placed the box on its rim: 246 at 69fbfe9, 239 when the looks only stopped
+    sooner by the carried box's reach (docs/history.md). Looks are skipped while the
+    carried box is in the way, and the box lands inside."""
     from smccli.bench import lookalike as la
 
-    rows = la.run_trials(clumsy_tree_2, 2, (239, 246), 1, [0.25, 0.35, 0.41])
+    rows = la.run_trials(clumsy_tree_2, 2, (246, 239), 1, [0.25, 0.35, 0.41])
     for row in rows:
         assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"
