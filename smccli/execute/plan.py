@@ -107,6 +107,12 @@ def action_duration(action: Action, start: np.ndarray, goal: np.ndarray) -> floa
     return max(MIN_DURATION, dmp.duration * scale, abs(goal[3] - start[3]) / MAX_YAW_RATE)
 
 
+def rollout_steps(duration: float, control_period: float) -> int:
+    """Poses in a rollout of ``duration`` [s] at ``control_period`` [s]: one per period and
+    the start, at least 3."""
+    return max(2, round(duration / control_period)) + 1
+
+
 def switch_index(action: Action, n: int) -> int | None:
     """Index of the gripper's switch in a rollout of ``action`` of ``n`` poses: at its
     phase when that comes before :data:`MIDWAY_PHASE` (e.g. grasp, then lift; never at
@@ -124,10 +130,10 @@ def switch_pose(
     """Where the POI is ``[x, y, z, yaw]`` when the gripper switches in the rollout of
     ``action`` from ``start`` to ``goal`` (:func:`rolled_out`'s): the goal itself unless
     the switch comes midway."""
-    duration = action_duration(action, start, goal)
-    n_steps = max(2, round(duration / control_period)) + 1
     if action.event == "none" or action.gripper_phase >= MIDWAY_PHASE:
         return np.asarray(goal, dtype=float)
+    duration = action_duration(action, start, goal)
+    n_steps = rollout_steps(duration, control_period)
     _, poses = rollout(action.dmp, start=start, goal=goal, duration=duration, n_steps=n_steps)
     i = switch_index(action, len(poses))
     assert i is not None
@@ -154,7 +160,7 @@ def rolled_out(
     ``scan_alignment``, ``cluster`` and ``grasp_shift`` as :class:`Plan` holds them;
     ``opening``: the fingers' opening on the way [0-1] instead of the demonstrated one."""
     duration = action_duration(action, start, goal)
-    n_steps = max(2, round(duration / control_period)) + 1
+    n_steps = rollout_steps(duration, control_period)
     times, poses = rollout(action.dmp, start=start, goal=goal, duration=duration, n_steps=n_steps)
     base_poses = None
     if base is not None and action.base_dmp is not None:

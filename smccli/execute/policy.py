@@ -131,7 +131,8 @@ class TreePolicy:
     def held_reach(self) -> float:
         """How far from the POI what the hand holds reaches [m]: 0 unless the last gripper
         event closed on an object (its view at the grasp decision, :attr:`Plan.cluster`).
-        Looking again stops that much sooner: the hand hides a goal with what it holds."""
+        No look is taken where what it holds may stand between the camera and the goal
+        (:func:`~smccli.execute.looking.held_in_the_way`)."""
         return self._held_reach
 
     def edge(self, edge_id: str) -> Edge:
