@@ -66,11 +66,21 @@ def test_same_seed_same_results_with_1_and_2_workers_and_on_a_dask_cluster(trees
     # and no process left once it is closed (a generous wait: processes exit at the
     # machine's pace).
     before = {p.pid for p in psutil.Process().children(recursive=True)}
-    with LocalCluster(
+    cluster = LocalCluster(
         n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
-    ) as cluster:
+    )
+    try:
         assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
         dask = cp.run_trials(tree, scene, trials=4, seed=3, cluster=cluster.scheduler_address)
+    finally:
+        try:
+            cluster.close()
+        except TimeoutError:
+            # Dask's Nanny.close gives a worker process 5 s to exit (its default, which
+            # LocalCluster does not pass on), then kills it and raises: beside CPU burners
+            # (make test-under-load, stop 51) that ran out once. No process left is what
+            # matters, and it is asserted below with a wait at the machine's pace.
+            pass
     assert [key(r) for r in one] == [key(r) for r in dask]
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and (
