@@ -153,32 +153,31 @@ def sample_trees(tmp_path_factory, sample_logs) -> dict[str, Path]:
     return out
 
 
-@pytest.fixture(scope="session")
-def clumsy_tree_0(tmp_path_factory) -> Path:
-    """The look-alike family's tree on development seed 0: clumsy operator 0's
-    demonstration (smccli/bench/learning.py) recorded and compiled (once per run)."""
+def _clumsy_tree(tmp_path_factory, operator: int) -> Path:
+    """The look-alike family's tree on development seed ``operator``: that clumsy
+    operator's demonstration (smccli/bench/learning.py) recorded and compiled (once per
+    run)."""
     from smccli.bench.learning import record_demos
     from smccli.learn.compile import compile_logs
 
-    with built_once(tmp_path_factory, "clumsy-0") as (root, build):
+    with built_once(tmp_path_factory, f"clumsy-{operator}") as (root, build):
         tree = root / "tree.json"
         if build:
-            compile_logs(record_demos(root, 1, first=0), tree, rebuild=True)
+            compile_logs(record_demos(root, 1, first=operator), tree, rebuild=True)
     return tree
+
+
+@pytest.fixture(scope="session")
+def clumsy_tree_0(tmp_path_factory) -> Path:
+    """Operator 0's tree (:func:`_clumsy_tree`)."""
+    return _clumsy_tree(tmp_path_factory, 0)
 
 
 @pytest.fixture(scope="session")
 def clumsy_tree_2(tmp_path_factory) -> Path:
-    """The look-alike family's tree on development seed 2: clumsy operator 2 closes the
-    gripper at 94 % of the grasp's fragment, then lifts (once per run)."""
-    from smccli.bench.learning import record_demos
-    from smccli.learn.compile import compile_logs
-
-    with built_once(tmp_path_factory, "clumsy-2") as (root, build):
-        tree = root / "tree.json"
-        if build:
-            compile_logs(record_demos(root, 1, first=2), tree, rebuild=True)
-    return tree
+    """Operator 2's tree (:func:`_clumsy_tree`): it closes the gripper at 94 % of the
+    grasp's fragment (the mark comes after the fingers settled)."""
+    return _clumsy_tree(tmp_path_factory, 2)
 
 
 @pytest.fixture(scope="session")
