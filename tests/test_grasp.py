@@ -15,12 +15,24 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 from smccli.bench import lookalike as la  # noqa: E402
-from smccli.execute.grasp import clear_grasp, finger_columns, others, shifted  # noqa: E402
+from smccli.execute import grasp  # noqa: E402
+from smccli.execute.grasp import (  # noqa: E402
+    clear_grasp,
+    finger_columns,
+    others,
+    shifted,
+    solid_neighbours,
+)
 from smccli.perception import Cluster  # noqa: E402
+from smccli.perception.params import PerceptionParams  # noqa: E402
+from smccli.world.geometry import to_frame  # noqa: E402
 
 MISSED = (144, 172)
 """Trials of development seed 0 whose grasp missed with a grey look-alike against the white
 box where a finger went down (docs/bench_lookalike.json at 7d5f948)."""
+MISSED_AT_AN_EDGE = (182,)
+"""A trial of development seed 0 whose finger came down on the edge of a look-alike 2.3 cm
+from the white box, where the camera had lost its points (1753a47)."""
 MISSED_MIDWAY = (90, 272)
 """Trials of development seed 2 whose finger came down on the look-alike, the box then
 dropped: its demonstration closes the gripper at 94 % of the fragment, and the fingers'
@@ -131,12 +143,88 @@ def test_a_neighbour_under_a_finger_moves_the_grasp_or_narrows_it(sim, rng) -> N
     assert moved is goal and (opening, shift) == (1.0, 0.0)
 
 
+def test_a_neighbour_too_near_for_the_margins_gets_the_grasp_with_the_most_room(sim, rng) -> None:
+    """A wall along the whole side 2.6 cm from the box: no opening keeps 5 mm around a
+    finger and 8 mm from the box, one keeps 3 and 6 mm; it is taken rather than the
+    demonstrated grasp, whose finger comes down on the wall."""
+    fingers = finger_columns(sim.model, sim.robot)
+    target = _box(0.5, 0.0, 0.0)
+    goal = np.array([0.5, 0.0, 0.02, 0.0])
+    wall = _box(0.5, 0.02 + 0.026 + 0.02, 0.0, 0.16, 0.04)  # its near side at y = 4.6 cm
+    points = others(np.r_[_slab(target, rng), _slab(wall, rng)], target)
+    moved, opening, shift = clear_grasp(goal, 1.0, target, points, fingers)
+    assert opening < 1.0 and shift == 0.0  # narrowed: along the wall no shift helps
+    inner, outer = fingers.inner_at(opening), fingers.outer_at(opening)
+    assert inner >= 0.02 + grasp.TIGHT_GRIP_MARGIN and outer + grasp.TIGHT_MARGIN <= 0.046
+    wide = [o for o in grasp.OPENINGS if fingers.inner_at(o) >= 0.02 + grasp.GRIP_MARGIN]
+    assert all(fingers.outer_at(o) + grasp.MARGIN > 0.046 for o in wide)  # none had room
+
+
+def _without_corners(cluster: Cluster, points: np.ndarray, radius: float) -> np.ndarray:
+    """``points`` less those within ``radius`` [m] of a corner of the box ``cluster``: what
+    a depth camera makes of its corners."""
+    local = np.abs(to_frame([*cluster.centroid[:2], cluster.yaw], points[:, :2]))
+    return points[np.hypot(*(local - cluster.extents[:2] / 2).T) > radius]
+
+
+def _cylinder(x: float, y: float, r: float, rng, n: int = 400) -> np.ndarray:
+    a, d = rng.uniform(0, 2 * math.pi, n), r * np.sqrt(rng.uniform(0, 1, n))
+    return np.c_[x + d * np.cos(a), y + d * np.sin(a), rng.uniform(0.005, 0.06, n)]
+
+
+def test_a_box_beside_the_grasp_stands_whole_where_the_camera_lost_its_corner(sim, rng) -> None:
+    """A neighbour's corner pokes into a finger's column, its points within 1 cm of the
+    corners lost (as the look-alike's near corners on development seed 4): as seen, the
+    column is empty and the finger would come down on the corner; filled in as the box it
+    is, the grasp makes room. The fill stays on the box, and a cylinder is left as seen."""
+    fingers = finger_columns(sim.model, sim.robot)
+    target = _box(0.5, 0.0, 0.0)
+    goal = np.array([0.5, 0.0, 0.02, 0.0])  # fingers along y, 5-6.2 cm out, |x| < 1.2 cm
+    # A 10 x 4 cm box turned 45 degrees, one corner 1 cm along x into the column at y 5.6 cm.
+    half = np.array([0.05, 0.02])
+    tip = np.array([0.51, 0.056])
+    centre = (
+        tip
+        + (half[0] + half[1]) / math.sqrt(2) * np.array([1.0, 0.0])
+        + (half[0] - half[1]) / math.sqrt(2) * np.array([0.0, 1.0])
+    )
+    corner = _box(*centre, math.pi / 4, 2 * half[0], 2 * half[1])
+    assert np.hypot(*(to_frame([*centre, math.pi / 4], tip[None])[0])) == pytest.approx(
+        np.hypot(*half)
+    )  # the tip is the box's corner
+    seen = _without_corners(corner, _slab(corner, rng, 3000), 0.01)
+    can = _cylinder(0.5, -0.2, 0.03, rng)
+    points = others(np.r_[_slab(target, rng), seen, can], target)
+    assert clear_grasp(goal, 1.0, target, points, fingers)[1:] == (1.0, 0.0)  # as seen
+    solid = solid_neighbours(points, PerceptionParams())
+    assert np.array_equal(solid[: len(points)], points)
+    moved, opening, shift = clear_grasp(goal, 1.0, target, solid, fingers)
+    assert shift != 0.0 or opening < 1.0
+    added = solid[len(points) :]
+    on_box = np.abs(to_frame([*centre, math.pi / 4], added[:, :2])) <= half + 0.003
+    assert len(added) and np.all(on_box), "the fill stays on the box's footprint"
+    assert np.all(added[:, 2] <= 0.05 + 1e-9)  # at its top, as its points stood
+    assert not np.any(np.hypot(added[:, 0] - 0.5, added[:, 1] + 0.2) < 0.05)  # round: as seen
+
+
 def test_missed_grasps_beside_a_lookalike_now_put_the_box_away(clumsy_tree_0) -> None:
     """Development seed 0's trials whose finger came down on the look-alike touching the
     white box: the grasp goes where the fingers have room, the box lands in the orange box."""
     rows = la.run_trials(clumsy_tree_0, 0, MISSED, 1, [0.25, 0.35, 0.41])
     for row in rows:
         assert row["gap_m"] < 1e-4
+        assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"
+
+
+def test_a_grasp_beside_a_lookalike_whose_edge_the_camera_lost_puts_the_box_away(
+    clumsy_tree_0,
+) -> None:
+    """Development seed 0's trial whose finger came down on the edge of the look-alike
+    standing apart from the white box: the look-alike stands whole in the fingers' room,
+    the grasp makes room, and the box lands in the orange box."""
+    rows = la.run_trials(clumsy_tree_0, 0, MISSED_AT_AN_EDGE, 1, [0.25, 0.35, 0.41])
+    for row in rows:
+        assert 0.01 < row["gap_m"] < 0.03
         assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"
 
 

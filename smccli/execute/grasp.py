@@ -9,6 +9,8 @@ the hand less. So does this module, from what the robot sees and its own model o
 
 - :func:`finger_columns` -- the fingers as boxes in the POI's frame at each opening, from
   the robot's MJCF (their collision geoms with the finger joints at that opening);
+- :func:`solid_neighbours` -- what stands beside the object, each box among it whole
+  (a depth camera loses an object's corners);
 - :func:`clear_grasp` -- where the demonstrated grasp's finger columns hold points of
   something else (the decision's cloud, less the grasped object), the nearest grasp along
   the object (the POI's x) and the widest opening whose columns are empty; the
@@ -23,10 +25,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import cv2
 import mujoco
 import numpy as np
 
 from smccli.perception import Cluster
+from smccli.perception.dbscan import dbscan_labels
+from smccli.perception.params import PerceptionParams
 from smccli.world.geometry import compose, from_frame, to_frame
 from smccli.world.robot import Robot
 from smccli.world.robot_model import subtree_bodies
@@ -43,8 +48,20 @@ GRIP_MARGIN = 0.008
 """Least room between an open finger and the grasped object's side [m]."""
 ON_OBJECT = 0.01
 """A moved grasp keeps its fingers this far inside the object's ends [m]."""
+TIGHT_MARGIN = 0.003
+"""Room kept around a finger's column where no grasp has :data:`MARGIN` [m]: a neighbour
+1.6 cm from the object leaves a finger 2-3 mm either side, and the demonstrated grasp
+would put the finger on the neighbour (development seed 1's trial 136)."""
+TIGHT_GRIP_MARGIN = 0.006
+"""Least room between an open finger and the object's side with :data:`TIGHT_MARGIN` [m]."""
 MIN_POINTS = 3
 """Points in a column that make it occupied (fewer: noise)."""
+FILL_STEP = 0.004
+"""Spacing of the points a neighbour's footprint is filled with [m]: a finger's column
+(2.4 x 1.2 cm at the pads) then holds dozens, against :data:`MIN_POINTS`."""
+TOP_QUANTILE = 0.95
+"""A filled neighbour stands as high as this quantile of its points (the highest one may
+be a flying pixel)."""
 ABOVE_TIP = 0.003
 """Points lower than this above the fingertips' height at the grasp do not block it [m]
 (what is left of the table)."""
@@ -128,6 +145,36 @@ def others(points: np.ndarray, target: Cluster, grow: float = MARGIN) -> np.ndar
     return points[~inside]
 
 
+def solid_neighbours(points: np.ndarray, params: PerceptionParams) -> np.ndarray:
+    """``points`` (n, 3) [m] of what stands beside the grasped object (:func:`others`), with
+    the footprint of each neighbour that is a box filled in at its top's height: (m, 3),
+    the n first.
+
+    A depth camera loses the pixels along an object's edges, and at a corner along two:
+    measured on the look-alike family (development seed 4, four misses in 200 trials), the
+    near corners of a look-alike 1-2 cm from the white box had no point within 1 cm, and a
+    finger came down on one of them. A neighbour (a DBSCAN cluster of ``points``) whose
+    seen footprint fills its smallest rectangle as a box's does (``round_fill``, the test
+    that tells a box from a cylinder in :mod:`~smccli.perception.clusters`) fills that
+    rectangle; a round one stays as seen."""
+    labels = dbscan_labels(points, params.dbscan_eps, params.dbscan_min_points)
+    solid = [points]
+    for k in range(int(labels.max(initial=-1)) + 1):
+        mine = points[labels == k]
+        xy = mine[:, :2].astype(np.float32)
+        rect = cv2.minAreaRect(xy)
+        area = float(rect[1][0] * rect[1][1])
+        if area <= 0 or cv2.contourArea(cv2.convexHull(xy)) < params.round_fill * area:
+            continue
+        c0, c1, _, c3 = cv2.boxPoints(rect).astype(np.float64)
+        s = np.linspace(0.0, 1.0, int(np.ceil(np.hypot(*(c1 - c0)) / FILL_STEP)) + 1)
+        t = np.linspace(0.0, 1.0, int(np.ceil(np.hypot(*(c3 - c0)) / FILL_STEP)) + 1)
+        grid = c0 + s[:, None, None] * (c1 - c0) + t[None, :, None] * (c3 - c0)
+        top = float(np.quantile(mine[:, 2], TOP_QUANTILE))
+        solid.append(np.c_[grid.reshape(-1, 2), np.full(grid.shape[0] * grid.shape[1], top)])
+    return np.vstack(solid)
+
+
 def clear_grasp(
     goal: np.ndarray,
     opening: float,
@@ -139,33 +186,35 @@ def clear_grasp(
     [0-1] on ``target``, moved where the finger columns are empty of ``points`` (n, 3)
     [m], what stands beside it (:func:`others`). Returns (goal, opening, shift along the
     POI's x [m]): the demonstrated ones where their columns are empty or where no grasp
-    tried is (the nearest shift first, and at each the widest opening)."""
+    tried is (the nearest shift first, and at each the widest opening); a grasp with
+    :data:`MARGIN` around its fingers before one with only :data:`TIGHT_MARGIN`."""
     high = points[points[:, 2] > goal[2] - fingers.tip + ABOVE_TIP]
     px, py = to_frame(goal[[0, 1, 3]], high[:, :2]).T  # the POI's x and y at the grasp
     py = np.abs(py)
     half = target.extents[:2] / 2
     corners = from_frame(_frame(target), half * [[1, 1], [-1, 1], [-1, -1], [1, -1]])
     box = to_frame(goal[[0, 1, 3]], corners)
-    need = float(np.max(np.abs(box[:, 1]))) + GRIP_MARGIN
+    side = float(np.max(np.abs(box[:, 1])))  # the object's farthest side along y
     length = float(np.ptp(box[:, 0]))
     reach = min(MAX_SHIFT, max(0.0, length / 2 - fingers.half_width - ON_OBJECT))
     steps = math.floor(reach / STEP + 1e-9)
 
-    def empty(shift: float, o: float) -> bool:
-        lo, hi = fingers.inner_at(o) - MARGIN, fingers.outer_at(o) + MARGIN
-        near = np.abs(px - shift) < fingers.half_width + MARGIN
+    def empty(shift: float, o: float, margin: float) -> bool:
+        lo, hi = fingers.inner_at(o) - margin, fingers.outer_at(o) + margin
+        near = np.abs(px - shift) < fingers.half_width + margin
         return int(np.count_nonzero(near & (py > lo) & (py < hi))) < MIN_POINTS
 
-    if empty(0.0, opening):
+    if empty(0.0, opening, MARGIN):
         return goal, opening, 0.0
     openings = [opening] + [o for o in OPENINGS if o < opening]
     shifts = sorted((STEP * k for k in range(-steps, steps + 1)), key=lambda v: (abs(v), v))
-    for shift in shifts:
-        for o in openings:
-            if fingers.inner_at(o) < need:
-                break
-            if empty(shift, o):
-                return shifted(goal, shift), float(o), shift
+    for margin, grip_margin in ((MARGIN, GRIP_MARGIN), (TIGHT_MARGIN, TIGHT_GRIP_MARGIN)):
+        for shift in shifts:
+            for o in openings:
+                if fingers.inner_at(o) < side + grip_margin:
+                    break
+                if empty(shift, o, margin):
+                    return shifted(goal, shift), float(o), shift
     return goal, opening, 0.0
 
 

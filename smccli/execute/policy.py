@@ -33,7 +33,14 @@ import numpy as np
 
 from smccli.errors import SmcError, TreeError
 from smccli.execute.decision import Candidate, Decision
-from smccli.execute.grasp import FingerColumns, clear_grasp, finger_columns, others, shifted
+from smccli.execute.grasp import (
+    FingerColumns,
+    clear_grasp,
+    finger_columns,
+    others,
+    shifted,
+    solid_neighbours,
+)
 from smccli.execute.looking import find_again
 from smccli.execute.matching import EdgeStack, equivalent, match_arm, match_base, match_edges
 from smccli.execute.observation import Observation
@@ -294,9 +301,8 @@ class TreePolicy:
             obs.camera, obs.robot_geometry, self.params.perception, obs.base
         )
         closing = switch_pose(action, start, goal, control_period)
-        _, opening, shift = clear_grasp(
-            closing, opening, cluster, others(points, cluster), self._fingers
-        )
+        beside = solid_neighbours(others(points, cluster), self.params.perception)
+        _, opening, shift = clear_grasp(closing, opening, cluster, beside, self._fingers)
         return (shifted(goal, shift) if shift else goal), opening, shift
 
     def _base_now(self, obs: Observation, edge: Edge) -> np.ndarray | None:
