@@ -153,6 +153,12 @@ def sample_trees(tmp_path_factory, sample_logs) -> dict[str, Path]:
     return out
 
 
+TWIN_THRESHOLD = [0.25, 0.35, 0.41]
+"""How far a white twin of the white box differs from it per channel, the look-alike
+family's calibration (:func:`smccli.bench.lookalike.calibrate`, 95th percentile, to two
+decimals): the tests' trials tell look-alikes apart by it without calibrating."""
+
+
 def _clumsy_tree(tmp_path_factory, operator: int) -> Path:
     """The look-alike family's tree on development seed ``operator``: that clumsy
     operator's demonstration (smccli/bench/learning.py) recorded and compiled (once per

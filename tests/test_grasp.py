@@ -13,6 +13,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from conftest import TWIN_THRESHOLD  # noqa: E402
 
 from smccli.bench import lookalike as la  # noqa: E402
 from smccli.execute import grasp  # noqa: E402
@@ -210,7 +211,7 @@ def test_a_box_beside_the_grasp_stands_whole_where_the_camera_lost_its_corner(si
 def test_missed_grasps_beside_a_lookalike_now_put_the_box_away(clumsy_tree_0) -> None:
     """Development seed 0's trials whose finger came down on the look-alike touching the
     white box: the grasp goes where the fingers have room, the box lands in the orange box."""
-    rows = la.run_trials(clumsy_tree_0, 0, MISSED, 1, [0.25, 0.35, 0.41])
+    rows = la.run_trials(clumsy_tree_0, 0, MISSED, 1, TWIN_THRESHOLD)
     for row in rows:
         assert row["gap_m"] < 1e-4
         assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"
@@ -222,7 +223,7 @@ def test_a_grasp_beside_a_lookalike_whose_edge_the_camera_lost_puts_the_box_away
     """Development seed 0's trial whose finger came down on the edge of the look-alike
     standing apart from the white box: the look-alike stands whole in the fingers' room,
     the grasp makes room, and the box lands in the orange box."""
-    rows = la.run_trials(clumsy_tree_0, 0, MISSED_AT_AN_EDGE, 1, [0.25, 0.35, 0.41])
+    rows = la.run_trials(clumsy_tree_0, 0, MISSED_AT_AN_EDGE, 1, TWIN_THRESHOLD)
     for row in rows:
         assert 0.01 < row["gap_m"] < 0.03
         assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"
@@ -236,7 +237,7 @@ def test_a_grasp_that_closes_before_the_fragment_ends_gets_room_too(clumsy_tree_
 
     grasp = next(e for e in load_tree(clumsy_tree_2).edges if e.smc.action.event == "close")
     assert grasp.smc.action.gripper_phase < 0.95  # the close comes midway (plan.MIDWAY_PHASE)
-    rows = la.run_trials(clumsy_tree_2, 2, MISSED_MIDWAY, 1, [0.25, 0.35, 0.41])
+    rows = la.run_trials(clumsy_tree_2, 2, MISSED_MIDWAY, 1, TWIN_THRESHOLD)
     for row in rows:
         assert row["gap_m"] < 0.03
         assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"

@@ -8,6 +8,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from conftest import TWIN_THRESHOLD  # noqa: E402
 
 from smccli.execute.episode import episode, layout_for, resolve  # noqa: E402
 from smccli.execute.executor import steer  # noqa: E402
@@ -186,6 +187,6 @@ def test_a_box_carried_over_the_orange_box_does_not_move_its_goal(clumsy_tree_2)
     carried box is in the way, and the box lands inside."""
     from smccli.bench import lookalike as la
 
-    rows = la.run_trials(clumsy_tree_2, 2, (246, 239), 1, [0.25, 0.35, 0.41])
+    rows = la.run_trials(clumsy_tree_2, 2, (246, 239), 1, TWIN_THRESHOLD)
     for row in rows:
         assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"

@@ -11,6 +11,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from conftest import TWIN_THRESHOLD  # noqa: E402
 
 from smccli.bench import lookalike as la  # noqa: E402
 from smccli.execute.evaluation import OUTCOMES  # noqa: E402
@@ -158,7 +159,7 @@ def test_two_trials_end_to_end_on_any_number_of_workers(clumsy_tree_0) -> None:
     """One clumsy demonstration recorded and compiled, two trials each on one and on two
     workers: every row is the episode's verdict on its own draw, the same either way."""
     tree = clumsy_tree_0
-    threshold = [0.25, 0.35, 0.41]
+    threshold = TWIN_THRESHOLD
     one = la.run_trials(tree, 0, [0, 2], 1, threshold)
     two = la.run_trials(tree, 0, [0, 2], 2, threshold)
     strip = lambda rows: [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]  # noqa: E731

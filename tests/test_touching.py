@@ -11,7 +11,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
-from conftest import first_view  # noqa: E402
+from conftest import TWIN_THRESHOLD, first_view  # noqa: E402
 
 from smccli.bench import lookalike as la  # noqa: E402
 from smccli.perception import cluster_splits, clusters_from_frame, d_cluster  # noqa: E402
@@ -71,7 +71,7 @@ def test_a_piece_of_the_merged_cluster_is_the_white_box(whole, tmp_path):
 def test_touching_trials_that_stopped_now_succeed(clumsy_tree_0) -> None:
     """One clumsy demonstration recorded and compiled; touching trials that stopped with
     ``no_contingent_smc`` run end to end and put the white box in the orange box."""
-    rows = la.run_trials(clumsy_tree_0, 0, TOUCHING[1:] + ANGLED, 1, [0.25, 0.35, 0.41])
+    rows = la.run_trials(clumsy_tree_0, 0, TOUCHING[1:] + ANGLED, 1, TWIN_THRESHOLD)
     for row in rows:
         assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"
 
