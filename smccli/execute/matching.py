@@ -13,6 +13,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -23,7 +24,13 @@ from smccli.learn.contingency import StoredStack, goal_gap, match_stack
 from smccli.learn.contingency import d_p as d_p_stored
 from smccli.learn.params import SmcParams
 from smccli.learn.tree import Edge
-from smccli.perception import Cluster, cluster_splits, cluster_unions, clusters_from_frame
+from smccli.perception import (
+    Cluster,
+    cluster_splits,
+    cluster_unions,
+    cluster_windows,
+    clusters_from_frame,
+)
 from smccli.perception.room import d_room, room_histogram
 from smccli.perception.scan import align_scans, chamfer
 
@@ -112,7 +119,14 @@ def match_arm(
         # whether two neighbouring clusters together, or a piece of one divided by brightness
         # or height, are it; only here, so a decision a whole object makes is never
         # changed. Pieces count only where they make an SMC contingent.
-        for more, least, contingent_only in ((cluster_unions, 2, False), (cluster_splits, 1, True)):
+        lengths = tuple(
+            float(e.smc.perception.cluster.extents[0])
+            for e in stack.edges
+            if e.smc.perception.cluster is not None
+        )
+        windows = partial(cluster_windows, lengths=lengths)
+        stages = ((cluster_unions, 2, False), (cluster_splits, 1, True), (windows, 1, True))
+        for more, least, contingent_only in stages:
             if ok.any() or n_seen < least:
                 continue
             t1 = time.perf_counter()

@@ -37,7 +37,7 @@ from smccli.perception.scan import (
     scan_from_dict,
     scan_to_dict,
 )
-from smccli.perception.splits import cluster_splits
+from smccli.perception.splits import cluster_splits, cluster_windows
 
 # open3d's parallel loops (ICP's normal equations, RANSAC, DBSCAN) reduce in thread order:
 # their last bits vary from run to run, enough to flip a decision near a threshold. One
@@ -56,6 +56,7 @@ __all__ = [
     "cloud_from_frame",
     "cluster_from_dict",
     "cluster_splits",
+    "cluster_windows",
     "cluster_to_dict",
     "cluster_unions",
     "clusters_from_frame",

@@ -42,6 +42,9 @@ whole disc, with no direction)."""
 MIN_DIRECTION_STEP = 20
 """Smallest difference of the two sides' mean local direction for a direction split, on
 0-255 for a half turn (20: 14 degrees)."""
+LONGER = 1.1
+"""A cluster or piece at least this much longer than a taught object is looked into for
+it (:func:`cluster_windows`): the depth camera's length error is a few percent."""
 MIN_BRIGHTNESS_STEP = 20
 """Smallest difference of the two sides' mean brightness for a brightness split (0-255):
 one object's top and sides differ by more, which is why every piece only ever is a
@@ -143,4 +146,38 @@ def cluster_splits(
     ):
         for part in split_parts(seg, idx, plane, params):
             found.append(describe_points(seg, part, params, base))
+    return tuple(sorted(found, key=lambda c: (float(c.centroid[0]), float(c.centroid[1]))))
+
+
+def cluster_windows(
+    frame: CameraFrame,
+    robot: RobotGeometry | None,
+    params: PerceptionParams,
+    base: np.ndarray | None = None,
+    lengths: tuple[float, ...] = (),
+) -> tuple[Cluster, ...]:
+    """Each end of each standing cluster and each of its pieces (:func:`split_parts`) that
+    is longer than a taught object: the points within one of ``lengths`` [m] of either end
+    along its length, each described as one object.
+
+    A look-alike touching the white box end to end is joined to it by every split where
+    its end reads as bright as the box: the white piece is 16-20 cm long where 14 were
+    taught, and nothing is contingent (development seed 2's 48, 156 and 196). The box is
+    then the part of that piece as long as the taught box, at the end away from the
+    look-alike; the taught perception says which end, if either, it is."""
+    seg = segment_frame(frame, robot, params, base)
+    found = []
+    for _, idx, plane in standing_clusters(
+        seg.points, seg.labels, seg.planes, params, params.min_cluster_points
+    ):
+        for part in [idx, *split_parts(seg, idx, plane, params)]:
+            whole = describe_points(seg, part, params, base)
+            axis = np.array([np.cos(whole.yaw), np.sin(whole.yaw)])
+            u = (seg.points[part, :2] - whole.centroid[:2]) @ axis
+            for length in lengths:
+                if whole.yaw_period != np.pi or whole.extents[0] < LONGER * length:
+                    continue
+                for end in (u <= u.min() + length, u >= u.max() - length):
+                    if np.count_nonzero(end) >= params.min_cluster_points:
+                        found.append(describe_points(seg, part[end], params, base))
     return tuple(sorted(found, key=lambda c: (float(c.centroid[0]), float(c.centroid[1]))))
