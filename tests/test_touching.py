@@ -14,7 +14,12 @@ import pytest  # noqa: E402
 from conftest import TWIN_THRESHOLD, first_view  # noqa: E402
 
 from smccli.bench import lookalike as la  # noqa: E402
-from smccli.perception import cluster_splits, clusters_from_frame, d_cluster  # noqa: E402
+from smccli.perception import (  # noqa: E402
+    cluster_splits,
+    cluster_windows,
+    clusters_from_frame,
+    d_cluster,
+)
 from smccli.perception.params import scene_perception  # noqa: E402
 
 T_HP = 0.1
@@ -26,6 +31,11 @@ ANGLED = (71,)
 """Trial of seed 0 whose grey look-alike (0.63) meets the white box's end at an angle (an
 L, 0.6 mm apart) and that still stopped with splits by brightness and height alone (at
 7d5f948): the local direction divides them."""
+
+ENDS = (48, 156, 196)
+"""Trials of development seed 2 whose grey look-alike (0.61-0.62) touches the white box
+and that stopped with ``no_contingent_smc`` at fabc2e9: every cluster or piece holding the
+white box was 16-17 cm long, where the demonstration's was 14."""
 
 
 @pytest.fixture(scope="module")
@@ -95,3 +105,40 @@ def test_two_bars_at_an_angle_fall_apart_by_direction() -> None:
     first, second = mask[: len(bar)][middle].mean(), mask[len(bar) :][middle].mean()
     assert min(first, 1 - first) < 0.05 and min(second, 1 - second) < 0.05
     assert abs(first - second) > 0.9
+
+
+def test_the_end_of_a_piece_too_long_is_the_white_box(clumsy_tree_2, tmp_path) -> None:
+    """Where neither a cluster nor a piece of one is within T_hP of the demonstration's
+    white box, the end of a piece as long as the taught box is, on the white box; no end
+    of the look-alike passes for it."""
+    from smccli.learn.tree import load_tree
+
+    tree = load_tree(clumsy_tree_2)
+    grasp = next(e for e in tree.edges if e.smc.action.event == "close")
+    taught = grasp.smc.perception.cluster
+    params = scene_perception(la.learning_scene())
+    for i in ENDS:
+        draw = la.draw_trial(la.learning_scene(), 2, i)
+        folder = tmp_path / str(i)
+        folder.mkdir()
+        layout = {**draw.layout, la.LOOKALIKE: draw.pose}
+        frame, robot = first_view(la.trial_scene(draw, folder), layout)
+        seen = clusters_from_frame(frame, robot, params) + cluster_splits(frame, robot, params)
+        assert min(d_cluster(c, taught, params) for c in seen) >= T_HP, f"trial {i}"
+        ends = cluster_windows(frame, robot, params, lengths=(float(taught.extents[0]),))
+        d, best = min(((d_cluster(c, taught, params), c) for c in ends), key=lambda t: t[0])
+        assert d < T_HP, f"trial {i}: best end D_P {d:.3f}"
+        assert _off(best, layout[la.TARGET]) < 0.01, f"trial {i}: {best.centroid}"
+        for c in ends:
+            if _off(c, draw.pose) < 0.03 and _off(c, layout[la.TARGET]) > 0.04:
+                assert d_cluster(c, taught, params) >= T_HP, f"trial {i}: {c.centroid}"
+
+
+def test_a_lookalike_against_the_white_box_s_end_no_longer_stops_the_robot(
+    clumsy_tree_2,
+) -> None:
+    """Development seed 2's trial that stopped with the look-alike against the white box's
+    end runs end to end and puts the white box in the orange box."""
+    (row,) = la.run_trials(clumsy_tree_2, 2, ENDS[-1:], 1, TWIN_THRESHOLD)
+    assert row["gap_m"] < 0.002
+    assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"
