@@ -56,26 +56,36 @@ def _off(cluster, pose) -> float:
     return float(np.hypot(*(cluster.centroid[:2] - np.asarray(pose)[:2])))
 
 
+def _trial_view(draw, folder):
+    """(layout, camera frame, robot geometry) of the look-alike family's trial ``draw``
+    before the robot moves; its scene is written to ``folder``."""
+    folder.mkdir()
+    layout = {**draw.layout, la.LOOKALIKE: draw.pose}
+    return layout, *first_view(la.trial_scene(draw, folder), layout)
+
+
+def _white_box_and_not_the_lookalike(candidates, taught, params, draw, layout, near) -> None:
+    """The candidate nearest ``taught`` is within T_hP and on the white box; none within
+    ``near`` [m] of the look-alike (and 4 cm from the white box) is within T_hP."""
+    trial = f"trial {draw.index}"
+    d, best = min(((d_cluster(c, taught, params), c) for c in candidates), key=lambda t: t[0])
+    assert d < T_HP, f"{trial}: best D_P {d:.3f}"
+    assert _off(best, layout[la.TARGET]) < 0.01, f"{trial}: {best.centroid}"
+    for c in candidates:
+        if _off(c, draw.pose) < near and _off(c, layout[la.TARGET]) > 0.04:
+            assert d_cluster(c, taught, params) >= T_HP, f"{trial}: {c.centroid}"
+
+
 def test_a_piece_of_the_merged_cluster_is_the_white_box(whole, tmp_path):
     view, params = whole
     for i in TOUCHING:
         draw = la.draw_trial(la.learning_scene(), 0, i)
         assert draw.gap < 0.001
-        folder = tmp_path / str(i)
-        folder.mkdir()
-        scene = la.trial_scene(draw, folder)
-        layout = {**draw.layout, la.LOOKALIKE: draw.pose}
-        frame, robot = first_view(scene, layout)
+        layout, frame, robot = _trial_view(draw, tmp_path / str(i))
         seen = clusters_from_frame(frame, robot, params)
         assert min(d_cluster(c, view, params) for c in seen) >= T_HP, f"trial {i}: not merged"
         pieces = cluster_splits(frame, robot, params)
-        d, best = min(((d_cluster(c, view, params), c) for c in pieces), key=lambda t: t[0])
-        assert d < T_HP, f"trial {i}: best piece D_P {d:.3f}"
-        assert _off(best, layout[la.TARGET]) < 0.01, f"trial {i}: {best.centroid}"
-        # No piece of the grey look-alike passes for the white box.
-        for c in pieces:
-            if _off(c, draw.pose) < 0.02 and _off(c, layout[la.TARGET]) > 0.04:
-                assert d_cluster(c, view, params) >= T_HP, f"trial {i}: {c.centroid}"
+        _white_box_and_not_the_lookalike(pieces, view, params, draw, layout, 0.02)
 
 
 def test_touching_trials_that_stopped_now_succeed(clumsy_tree_0) -> None:
@@ -119,19 +129,11 @@ def test_the_end_of_a_piece_too_long_is_the_white_box(clumsy_tree_2, tmp_path) -
     params = scene_perception(la.learning_scene())
     for i in ENDS:
         draw = la.draw_trial(la.learning_scene(), 2, i)
-        folder = tmp_path / str(i)
-        folder.mkdir()
-        layout = {**draw.layout, la.LOOKALIKE: draw.pose}
-        frame, robot = first_view(la.trial_scene(draw, folder), layout)
+        layout, frame, robot = _trial_view(draw, tmp_path / str(i))
         seen = clusters_from_frame(frame, robot, params) + cluster_splits(frame, robot, params)
         assert min(d_cluster(c, taught, params) for c in seen) >= T_HP, f"trial {i}"
         ends = cluster_windows(frame, robot, params, lengths=(float(taught.extents[0]),))
-        d, best = min(((d_cluster(c, taught, params), c) for c in ends), key=lambda t: t[0])
-        assert d < T_HP, f"trial {i}: best end D_P {d:.3f}"
-        assert _off(best, layout[la.TARGET]) < 0.01, f"trial {i}: {best.centroid}"
-        for c in ends:
-            if _off(c, draw.pose) < 0.03 and _off(c, layout[la.TARGET]) > 0.04:
-                assert d_cluster(c, taught, params) >= T_HP, f"trial {i}: {c.centroid}"
+        _white_box_and_not_the_lookalike(ends, taught, params, draw, layout, 0.03)
 
 
 def test_a_lookalike_against_the_white_box_s_end_no_longer_stops_the_robot(
