@@ -117,8 +117,9 @@ def match_arm(
         # its floor, apart across a band of depth holes), or two objects touching may be
         # one cluster (a white box with a grey box against it). Its taught perception says
         # whether two neighbouring clusters together, or a piece of one divided by brightness
-        # or height, are it; only here, so a decision a whole object makes is never
-        # changed. Pieces count only where they make an SMC contingent.
+        # or height, are it, or else the end of a piece longer than the taught object
+        # (one end to end with it); only here, so a decision a whole object makes is never
+        # changed. Pieces and ends count only where they make an SMC contingent.
         lengths = tuple(
             float(e.smc.perception.cluster.extents[0])
             for e in stack.edges

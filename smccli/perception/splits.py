@@ -11,7 +11,9 @@ object of its own (:func:`~smccli.perception.clusters.describe_points`). The SMC
 perception then says whether a piece is the taught object
 (:func:`~smccli.execute.matching.match_arm` tries these only where no single cluster, nor
 a union of two, is contingent), the mirror image of
-:func:`~smccli.perception.clusters.cluster_unions`.
+:func:`~smccli.perception.clusters.cluster_unions`. Where no piece is either,
+:func:`cluster_windows` takes each end of a cluster or piece longer than the taught
+object, as long as it: a look-alike end to end with the white box joins its piece.
 """
 
 from __future__ import annotations
