@@ -21,6 +21,7 @@ from smccli.perception import (  # noqa: E402
     d_cluster,
 )
 from smccli.perception.params import scene_perception  # noqa: E402
+from smccli.perception.splits import windows  # noqa: E402
 
 T_HP = 0.1
 TOUCHING = (35, 56, 90)
@@ -37,6 +38,11 @@ ENDS = (48, 156, 196)
 and that stopped with ``no_contingent_smc`` at fabc2e9: every cluster or piece holding the
 white box was 16-17 cm long, where the demonstration's was 14."""
 
+SIDE = 107
+"""Trial of seed 0 that stopped with ``no_contingent_smc`` at b59ba97: the grey look-alike
+(0.55) along the white box's side made every piece holding the white box 5-6 cm wide,
+where the demonstration's was 4."""
+
 
 @pytest.fixture(scope="module")
 def whole():
@@ -50,6 +56,18 @@ def whole():
     c = min(clusters_from_frame(frame, robot, params), key=lambda k: _off(k, white))
     assert _off(c, white) < 0.01
     return c, params
+
+
+def _taught(tree_file):
+    """The taught perception of the grasp of the tree in ``tree_file``."""
+    from smccli.learn.tree import load_tree
+
+    tree = load_tree(tree_file)
+    return next(e for e in tree.edges if e.smc.action.event == "close").smc.perception.cluster
+
+
+def _size(cluster) -> tuple[float, float]:
+    return float(cluster.extents[0]), float(cluster.extents[1])
 
 
 def _off(cluster, pose) -> float:
@@ -91,7 +109,7 @@ def test_a_piece_of_the_merged_cluster_is_the_white_box(whole, tmp_path):
 def test_touching_trials_that_stopped_now_succeed(clumsy_tree_0) -> None:
     """One clumsy demonstration recorded and compiled; touching trials that stopped with
     ``no_contingent_smc`` run end to end and put the white box in the orange box."""
-    rows = la.run_trials(clumsy_tree_0, 0, TOUCHING[1:] + ANGLED, 1, TWIN_THRESHOLD)
+    rows = la.run_trials(clumsy_tree_0, 0, (*TOUCHING[1:], *ANGLED, SIDE), 1, TWIN_THRESHOLD)
     for row in rows:
         assert row["success"], f"trial {row['trial']}: {row['outcome']}: {row['reason']}"
 
@@ -121,19 +139,44 @@ def test_the_end_of_a_piece_too_long_is_the_white_box(clumsy_tree_2, tmp_path) -
     """Where neither a cluster nor a piece of one is within T_hP of the demonstration's
     white box, the end of a piece as long as the taught box is, on the white box; no end
     of the look-alike passes for it."""
-    from smccli.learn.tree import load_tree
 
-    tree = load_tree(clumsy_tree_2)
-    grasp = next(e for e in tree.edges if e.smc.action.event == "close")
-    taught = grasp.smc.perception.cluster
+    taught = _taught(clumsy_tree_2)
     params = scene_perception(la.learning_scene())
     for i in ENDS:
         draw = la.draw_trial(la.learning_scene(), 2, i)
         layout, frame, robot = _trial_view(draw, tmp_path / str(i))
         seen = clusters_from_frame(frame, robot, params) + cluster_splits(frame, robot, params)
         assert min(d_cluster(c, taught, params) for c in seen) >= T_HP, f"trial {i}"
-        ends = cluster_windows(frame, robot, params, lengths=(float(taught.extents[0]),))
+        ends = cluster_windows(frame, robot, params, sizes=(_size(taught),))
         _white_box_and_not_the_lookalike(ends, taught, params, draw, layout, 0.03)
+
+
+def test_the_side_of_a_piece_too_wide_is_the_white_box(clumsy_tree_0, tmp_path) -> None:
+    """Where a look-alike along the white box's side makes every piece holding it too wide,
+    the window of the taught width at its far side is the white box; none on the
+    look-alike passes for it."""
+    taught = _taught(clumsy_tree_0)
+    params = scene_perception(la.learning_scene())
+    draw = la.draw_trial(la.learning_scene(), 0, SIDE)
+    layout, frame, robot = _trial_view(draw, tmp_path / "side")
+    seen = clusters_from_frame(frame, robot, params) + cluster_splits(frame, robot, params)
+    assert min(d_cluster(c, taught, params) for c in seen) >= T_HP
+    found = cluster_windows(frame, robot, params, sizes=(_size(taught),), ends_only=False)
+    _white_box_and_not_the_lookalike(found, taught, params, draw, layout, 0.03)
+
+
+def test_a_piece_too_short_grows_into_its_cluster() -> None:
+    """A 14 x 4 cm bar whose last 3 cm went to the piece of a bar across its end (an L): a
+    window of the taught size from the piece's far end, on the cluster's points, is the
+    whole bar and nothing of the other."""
+    u, v = np.meshgrid(np.arange(0.0, 0.14, 0.004), np.arange(-0.018, 0.02, 0.004))
+    bar = np.c_[u.ravel(), v.ravel()]
+    across = np.c_[v.ravel() + 0.162, u.ravel() - 0.07]  # its side against the bar's end
+    xy = np.r_[bar, across]
+    part = np.flatnonzero(bar[:, 0] < 0.11)
+    found = windows(xy, part, 0.0, np.array([0.108, 0.036]), ((0.14, 0.038),))
+    whole_bar = set(range(len(bar)))
+    assert any(set(w.tolist()) == whole_bar for w in found)
 
 
 def test_a_lookalike_against_the_white_box_s_end_no_longer_stops_the_robot(

@@ -118,15 +118,21 @@ def match_arm(
         # one cluster (a white box with a grey box against it). Its taught perception says
         # whether two neighbouring clusters together, or a piece of one divided by brightness
         # or height, are it, or else the end of a piece longer than the taught object
-        # (one end to end with it); only here, so a decision a whole object makes is never
-        # changed. Pieces and ends count only where they make an SMC contingent.
-        lengths = tuple(
-            float(e.smc.perception.cluster.extents[0])
-            for e in stack.edges
-            if e.smc.perception.cluster is not None
+        # (one end to end with it), or else a part of the taught size of a piece too wide
+        # or too short (one along its side, or across its end); each only where the
+        # previous found nothing, so a decision the previous made is never changed. Pieces
+        # and windows count only where they make an SMC contingent.
+        taught = [e.smc.perception.cluster for e in stack.edges if e.smc.perception.cluster]
+        sizes = tuple((float(c.extents[0]), float(c.extents[1])) for c in taught)
+        ends = partial(cluster_windows, sizes=sizes)
+        unknown = any(np.isnan(c.brightness) for c in taught)
+        windows = partial(cluster_windows, sizes=sizes, ends_only=False, unknown_brightness=unknown)
+        stages = (
+            (cluster_unions, 2, False),
+            (cluster_splits, 1, True),
+            (ends, 1, True),
+            (windows, 1, True),
         )
-        windows = partial(cluster_windows, lengths=lengths)
-        stages = ((cluster_unions, 2, False), (cluster_splits, 1, True), (windows, 1, True))
         for more, least, contingent_only in stages:
             if ok.any() or n_seen < least:
                 continue

@@ -12,11 +12,14 @@ perception then says whether a piece is the taught object
 (:func:`~smccli.execute.matching.match_arm` tries these only where no single cluster, nor
 a union of two, is contingent), the mirror image of
 :func:`~smccli.perception.clusters.cluster_unions`. Where no piece is either,
-:func:`cluster_windows` takes each end of a cluster or piece longer than the taught
-object, as long as it: a look-alike end to end with the white box joins its piece.
+:func:`cluster_windows` takes the parts of the taught size at either end and side of a
+cluster or piece longer, wider or shorter than the taught object: a look-alike end to end
+or side by side with the white box joins its piece, or takes part of it.
 """
 
 from __future__ import annotations
+
+import itertools
 
 import cv2
 import numpy as np
@@ -112,22 +115,27 @@ def local_direction(points: np.ndarray) -> np.ndarray:
 
 
 def split_parts(
-    seg: Segmentation, idx: np.ndarray, plane: np.ndarray | None, params: PerceptionParams
+    seg: Segmentation,
+    idx: np.ndarray,
+    plane: np.ndarray | None,
+    params: PerceptionParams,
+    local: bool = False,
 ) -> list[np.ndarray]:
     """The pieces ``idx`` (k,) of ``seg`` divides into: each side of each of
     :func:`split_masks`, cut into its connected pieces (DBSCAN with the scene's own
-    parameters), those of at least ``min_cluster_points``; no piece twice."""
+    parameters), those of at least ``min_cluster_points``; no piece twice. Each piece
+    indexes ``seg``'s points, or with ``local`` ``idx``."""
     out: list[np.ndarray] = []
     seen: set[bytes] = set()
     for mask in split_masks(seg.points[idx], seg.colors[idx], plane):
-        for side in (idx[mask], idx[~mask]):
-            labels = cluster_labels(seg.points[side], params)
+        for side in np.flatnonzero(mask), np.flatnonzero(~mask):
+            labels = cluster_labels(seg.points[idx[side]], params)
             for k in range(int(labels.max(initial=-1)) + 1):
                 part = side[labels == k]
                 key = part.tobytes()
                 if len(part) >= params.min_cluster_points and key not in seen:
                     seen.add(key)
-                    out.append(part)
+                    out.append(part if local else idx[part])
     return out
 
 
@@ -156,30 +164,82 @@ def cluster_windows(
     robot: RobotGeometry | None,
     params: PerceptionParams,
     base: np.ndarray | None = None,
-    lengths: tuple[float, ...] = (),
+    sizes: tuple[tuple[float, float], ...] = (),
+    ends_only: bool = True,
+    unknown_brightness: bool = True,
 ) -> tuple[Cluster, ...]:
-    """Each end of each standing cluster and each of its pieces (:func:`split_parts`) that
-    is longer than a taught object: the points within one of ``lengths`` [m] of either end
-    along its length, each described as one object.
+    """The parts of the taught size of each standing cluster and each of its pieces
+    (:func:`split_parts`) whose size differs from a taught object's, each described as one
+    object: for each taught (length, width) of ``sizes`` [m], :func:`windows` (the ends of
+    those too long alone, or every other window). Without ``unknown_brightness``, a window
+    whose brightness is unknown is left out: a window is a guess, and the side windows of
+    look-alikes (0.58-0.64) of unknown brightness passed for the box where the box's did
+    not (seed 5's 125, seed 6's 177).
 
     A look-alike touching the white box end to end is joined to it by every split where
     its end reads as bright as the box: the white piece is 16-20 cm long where 14 were
     taught, and nothing is contingent (development seed 2's 48, 156 and 196). The box is
     then the part of that piece as long as the taught box, at the end away from the
-    look-alike; the taught perception says which end, if either, it is."""
+    look-alike. One along its side joins the near side's points: the piece is 5-7 cm wide
+    where 4 were taught (seed 0's 107, seed 6's 118 and 177); one against its end may take
+    the box's end: the piece is 11 cm long (seed 5's 3). The taught perception says which
+    window, if any, is the box."""
     seg = segment_frame(frame, robot, params, base)
     found = []
     for _, idx, plane in standing_clusters(
         seg.points, seg.labels, seg.planes, params, params.min_cluster_points
     ):
-        for part in [idx, *split_parts(seg, idx, plane, params)]:
-            whole = describe_points(seg, part, params, base)
-            axis = np.array([np.cos(whole.yaw), np.sin(whole.yaw)])
-            u = (seg.points[part, :2] - whole.centroid[:2]) @ axis
-            for length in lengths:
-                if whole.yaw_period != np.pi or whole.extents[0] < LONGER * length:
+        xy = seg.points[idx, :2]
+        for part in [np.arange(len(idx)), *split_parts(seg, idx, plane, params, local=True)]:
+            whole = describe_points(seg, idx[part], params, base)
+            if whole.yaw_period != np.pi:
+                continue
+            for window in windows(xy, part, whole.yaw, whole.extents[:2], sizes, ends_only):
+                if len(window) < params.min_cluster_points:
                     continue
-                for end in (u <= u.min() + length, u >= u.max() - length):
-                    if np.count_nonzero(end) >= params.min_cluster_points:
-                        found.append(describe_points(seg, part[end], params, base))
+                view = describe_points(seg, idx[window], params, base)
+                if unknown_brightness or not np.isnan(view.brightness):
+                    found.append(view)
     return tuple(sorted(found, key=lambda c: (float(c.centroid[0]), float(c.centroid[1]))))
+
+
+def _off_size(extent: float, taught: float) -> int:
+    """1 where ``extent`` is :data:`LONGER` than ``taught``, -1 shorter, else 0."""
+    return int(extent >= LONGER * taught) - int(LONGER * extent <= taught)
+
+
+def windows(
+    xy: np.ndarray,
+    part: np.ndarray,
+    yaw: float,
+    extents: np.ndarray,
+    sizes: tuple[tuple[float, float], ...],
+    ends_only: bool = False,
+) -> list[np.ndarray]:
+    """The windows (index arrays into ``xy``) of the piece ``part`` (indices) of one
+    cluster's points ``xy`` (n, 2) [m]; the piece's length runs along ``yaw`` [rad], its
+    (length, width) is ``extents`` [m]. For each taught (length, width) of ``sizes`` [m],
+    along its length or across its width: a piece :data:`LONGER` than taught gives its
+    points within the taught size of either end (or side); one shorter, the cluster's
+    points in the piece's band from either end over the taught size (the part of the box
+    a look-alike against it took). ``ends_only``: only the ends of a piece too long; else
+    every window but those, each of a piece whose other size is about right: a window cut
+    across a merged cluster (22 x 15 cm), over the ends of a white box and a look-alike in
+    a V, passed for the box (development seed 0's 107)."""
+    axis = np.array([np.cos(yaw), np.sin(yaw)])
+    uv = np.c_[xy @ axis, xy @ np.array([-axis[1], axis[0]])]
+    lo, hi = uv[part].min(axis=0), uv[part].max(axis=0)
+    out = []
+    for size, k in itertools.product(sizes, (0,) if ends_only else (0, 1)):
+        off = [_off_size(e, t) for e, t in zip(extents[:2], size, strict=True)]
+        if off[k] == 0 or (k == 0 and (off[k] > 0) != ends_only) or (off[1 - k] and not ends_only):
+            continue
+        longer = off[k] > 0
+        if longer:
+            pts = part
+        else:  # the cluster's points in the piece's band
+            j = 1 - k
+            pts = np.flatnonzero((uv[:, j] >= lo[j]) & (uv[:, j] <= hi[j]))
+        for start in (lo[k], hi[k] - size[k]):
+            out.append(pts[(uv[pts, k] >= start) & (uv[pts, k] <= start + size[k])])
+    return out
