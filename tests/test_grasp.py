@@ -161,6 +161,21 @@ def test_a_neighbour_too_near_for_the_margins_gets_the_grasp_with_the_most_room(
     assert all(fingers.outer_at(o) + grasp.MARGIN > 0.046 for o in wide)  # none had room
 
 
+def test_a_neighbour_between_the_fingers_moves_the_grasp_off_it(sim, rng) -> None:
+    """A thin bar flush along the box's side over half its length, thin enough that the
+    open fingers go down beyond it: closing would squeeze it in with the box (seeds 8 and
+    9 lifted both). The grasp moves along the box until nothing lies between the fingers."""
+    fingers = finger_columns(sim.model, sim.robot)
+    target = _box(0.5, 0.0, 0.0)
+    goal = np.array([0.5, 0.0, 0.02, 0.0])
+    width = fingers.inner_at(1.0) - grasp.MARGIN - 0.003 - 0.02  # clear of the column
+    bar = _box(0.5 + 0.035, 0.02 + width / 2, 0.0, 0.07, width)
+    points = others(np.r_[_slab(target, rng), _slab(bar, rng)], target)
+    moved, opening, shift = clear_grasp(goal, 1.0, target, points, fingers)
+    assert shift < 0.0 and moved == pytest.approx(shifted(goal, shift))
+    assert 0.5 + shift + fingers.half_width < 0.5  # the fingers clear of the bar's end
+
+
 def _without_corners(cluster: Cluster, points: np.ndarray, radius: float) -> np.ndarray:
     """``points`` less those within ``radius`` [m] of a corner of the box ``cluster``: what
     a depth camera makes of its corners."""
