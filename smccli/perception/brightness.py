@@ -47,6 +47,10 @@ SIDE_BAND = (0.25, 0.75)
 table's contact shadow and below the top's edge, where depth noise and edge holes mix
 top pixels into what is below the top layer (a grey bar's 12-18 such points had a
 median of 159-200 where its sides' middle had 99-120)."""
+BENEATH = 0.01
+"""How far in x-y from a piece's points its cluster's side faces count as beneath it
+[m] (:func:`sides_beneath`): a box's side face lies within a few mm of its top's edge, and
+the depth camera loses about as much along the edge."""
 MIN_RING_POINTS = 50
 """Fewer table points in the ring than this (an object at the table's edge, the arm over
 it): no reference, NaN."""
@@ -57,6 +61,23 @@ def side_points(heights: np.ndarray) -> np.ndarray:
     ``heights`` (n,) above the table [m]."""
     top = float(heights.max(initial=0.0))
     return (heights >= SIDE_BAND[0] * top) & (heights <= SIDE_BAND[1] * top)
+
+
+def sides_beneath(
+    piece: np.ndarray, cluster: np.ndarray, heights: np.ndarray, top: float
+) -> np.ndarray:
+    """The middle of the side faces beneath a piece of a cluster, mask (n,) of the
+    cluster's points ``cluster`` (n, 3) [m] with ``heights`` (n,) above the table: those
+    within :data:`BENEATH` of the piece's points ``piece`` (k, 3) in x-y, in
+    :data:`SIDE_BAND` of the piece's ``top`` [m].
+
+    A piece cut from a cluster by brightness or height may be a top alone (its sides on
+    the other side of the cut), of unknown brightness: a 0.40 grey look-alike's clipped top
+    then passed for the white box (development seed 8's 181). Its cluster's sides beneath
+    it are its own object's: 0.44 there, the white box's top 1.15."""
+    d, _ = cKDTree(piece[:, :2]).query(cluster[:, :2], distance_upper_bound=BENEATH)
+    band = (heights >= SIDE_BAND[0] * top) & (heights <= SIDE_BAND[1] * top)
+    return np.isfinite(d) & band
 
 
 def relative_brightness(

@@ -16,7 +16,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from smccli.errors import TreeError
-from smccli.perception.brightness import relative_brightness, side_points
+from smccli.perception.brightness import relative_brightness, side_points, sides_beneath
 from smccli.perception.cloud import heights_above, in_crop_frame
 from smccli.perception.histogram import hsv_histogram
 from smccli.perception.params import PerceptionParams
@@ -255,11 +255,17 @@ def _describe_asymmetric(
 
 
 def describe_points(
-    seg: Segmentation, idx: np.ndarray, params: PerceptionParams, base: np.ndarray | None
+    seg: Segmentation,
+    idx: np.ndarray,
+    params: PerceptionParams,
+    base: np.ndarray | None,
+    around: np.ndarray | None = None,
 ) -> Cluster:
     """The cluster of points ``idx`` (k,) of ``seg``: :func:`describe_cluster` with its
     brightness, the points hidden by something in front and the crop box's faces it
-    reaches."""
+    reaches. ``around``: for a piece of a cluster, that cluster's points (indices of
+    ``seg``), whose side faces beneath the piece give its brightness where its own are
+    too few (:func:`~smccli.perception.brightness.sides_beneath`)."""
     points, colors = seg.points[idx], seg.colors[idx]
     plane = support_of(points, seg.planes, params)
     cluster = describe_cluster(points, colors, plane, params, seg.cut[idx])
@@ -267,6 +273,11 @@ def describe_points(
     if params.brightness_scale > 0:
         side = side_points(heights_above(points, plane))
         brightness = relative_brightness(points, colors, side, *seg.table, params)
+        if math.isnan(brightness) and around is not None and plane is not None:
+            top = float(heights_above(points, plane).max(initial=0.0))
+            near = seg.points[around]
+            side = sides_beneath(points, near, heights_above(near, plane), top)
+            brightness = relative_brightness(near, seg.colors[around], side, *seg.table, params)
     cluster = replace(cluster, brightness=brightness, hidden=int(seg.occluded[idx].sum()))
     faces = crop_faces(
         in_crop_frame(points, params, base),

@@ -155,7 +155,7 @@ def cluster_splits(
         seg.points, seg.labels, seg.planes, params, 2 * params.min_cluster_points
     ):
         for part in split_parts(seg, idx, plane, params):
-            found.append(describe_points(seg, part, params, base))
+            found.append(describe_points(seg, part, params, base, around=idx))
     return tuple(sorted(found, key=lambda c: (float(c.centroid[0]), float(c.centroid[1]))))
 
 
@@ -197,7 +197,7 @@ def cluster_windows(
             for window in windows(xy, part, whole.yaw, whole.extents[:2], sizes, ends_only):
                 if len(window) < params.min_cluster_points:
                     continue
-                view = describe_points(seg, idx[window], params, base)
+                view = describe_points(seg, idx[window], params, base, around=idx)
                 if unknown_brightness or not np.isnan(view.brightness):
                     found.append(view)
     return tuple(sorted(found, key=lambda c: (float(c.centroid[0]), float(c.centroid[1]))))
