@@ -165,6 +165,20 @@ def test_the_side_of_a_piece_too_wide_is_the_white_box(clumsy_tree_0, tmp_path) 
     _white_box_and_not_the_lookalike(found, taught, params, draw, layout, 0.03)
 
 
+def test_a_piece_cut_from_its_cluster_is_as_bright_as_the_sides_beneath_it(tmp_path) -> None:
+    """Development seed 8's 181: a 0.40 grey look-alike 2 cm from the white box, each cut
+    by brightness into its clipped top and the rest. Every piece of the look-alike reads
+    as dark as its sides, every piece of the white box as bright as its own: none is of
+    unknown brightness (the look-alike's top had been, and was grasped)."""
+    draw = la.draw_trial(la.learning_scene(), 8, 181)
+    layout, frame, robot = _trial_view(draw, tmp_path / "t")
+    pieces = cluster_splits(frame, robot, scene_perception(la.learning_scene()))
+    on_lookalike = [c.brightness for c in pieces if _off(c, draw.pose) < 0.01]
+    on_white = [c.brightness for c in pieces if _off(c, layout[la.TARGET]) < 0.01]
+    assert len(on_lookalike) >= 2 and max(on_lookalike) < 0.6, on_lookalike
+    assert len(on_white) >= 2 and min(on_white) > 0.9, on_white
+
+
 def test_a_piece_too_short_grows_into_its_cluster() -> None:
     """A 14 x 4 cm bar whose last 3 cm went to the piece of a bar across its end (an L): a
     window of the taught size from the piece's far end, on the cluster's points, is the
