@@ -176,6 +176,24 @@ def test_a_neighbour_between_the_fingers_moves_the_grasp_off_it(sim, rng) -> Non
     assert 0.5 + shift + fingers.half_width < 0.5  # the fingers clear of the bar's end
 
 
+def test_a_neighbour_nearer_still_gets_the_last_pass(sim, rng) -> None:
+    """A wall along the whole side 1.9 cm from the box: no opening keeps 3 mm around a
+    finger and 6 mm from the box; one keeps 1.5 and 3 mm, and is taken rather than the
+    demonstrated grasp, whose finger comes down on the wall."""
+    fingers = finger_columns(sim.model, sim.robot)
+    target = _box(0.5, 0.0, 0.0)
+    goal = np.array([0.5, 0.0, 0.02, 0.0])
+    near = 0.02 + 0.019  # the wall's near side
+    wall = _box(0.5, near + 0.02, 0.0, 0.16, 0.04)
+    points = others(np.r_[_slab(target, rng), _slab(wall, rng)], target)
+    moved, opening, shift = clear_grasp(goal, 1.0, target, points, fingers)
+    assert opening < 1.0 and shift == 0.0
+    assert fingers.inner_at(opening) >= 0.02 + grasp.LAST_GRIP_MARGIN
+    assert fingers.outer_at(opening) + grasp.LAST_MARGIN <= near
+    tight = [o for o in grasp.OPENINGS if fingers.inner_at(o) >= 0.02 + grasp.TIGHT_GRIP_MARGIN]
+    assert all(fingers.outer_at(o) + grasp.TIGHT_MARGIN > near for o in tight)
+
+
 def _without_corners(cluster: Cluster, points: np.ndarray, radius: float) -> np.ndarray:
     """``points`` less those within ``radius`` [m] of a corner of the box ``cluster``: what
     a depth camera makes of its corners."""
