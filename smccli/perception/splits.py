@@ -30,6 +30,7 @@ from smccli.perception.cloud import heights_above
 from smccli.perception.clusters import Cluster, describe_points
 from smccli.perception.params import PerceptionParams
 from smccli.perception.segment import Segmentation, cluster_labels, segment_frame, standing_clusters
+from smccli.world.geometry import to_frame
 from smccli.world.sensors import CameraFrame, RobotGeometry
 
 TOP_RADIUS = 0.015
@@ -226,8 +227,7 @@ def windows(
     every window but those, each of a piece whose other size is about right: a window cut
     across a merged cluster (22 x 15 cm), over the ends of a white box and a look-alike in
     a V, passed for the box (development seed 0's 107)."""
-    axis = np.array([np.cos(yaw), np.sin(yaw)])
-    uv = np.c_[xy @ axis, xy @ np.array([-axis[1], axis[0]])]
+    uv = to_frame((0.0, 0.0, yaw), xy)  # along the piece's length, across it
     lo, hi = uv[part].min(axis=0), uv[part].max(axis=0)
     out = []
     for size, k in itertools.product(sizes, (0,) if ends_only else (0, 1)):
