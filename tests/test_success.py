@@ -162,7 +162,7 @@ def _tree(folder: Path, scene: Path, parts: list[str]) -> Path:
 @pytest.mark.slow
 def test_all_of_gives_nothing_to_half_a_task(tmp_path: Path) -> None:
     """0 % for a tree that does only the first half of a two-object task scored with
-    all_of, at least 11 in 12 for the whole one: 12 trials each (what is checked is how all_of
+    all_of, at least 7 in 8 for the whole one: 8 trials each (what is checked is how all_of
     scores, not a success rate; the campaign figures measure rates)."""
     from smccli.execute.episode import resolve
 
@@ -170,7 +170,7 @@ def test_all_of_gives_nothing_to_half_a_task(tmp_path: Path) -> None:
     rates = {}
     for parts in (["cube"], ["cube", "pyramid"]):
         tree, sc = resolve(_tree(tmp_path, scene, parts), str(scene))
-        results = run_trials(tree, sc, trials=12, seed=0, workers=2)
+        results = run_trials(tree, sc, trials=8, seed=0, workers=2)
         rates["_".join(parts)] = sum(r.success for r in results) / len(results)
         assert all(len(r.criteria) == 2 for r in results if r.outcome != "no_contingent_smc")
         if parts == ["cube"]:  # the leaf came with the pyramid untouched: taught too little
@@ -179,7 +179,7 @@ def test_all_of_gives_nothing_to_half_a_task(tmp_path: Path) -> None:
                 r.outcome for r in done
             }
     assert rates["cube"] == 0.0, rates
-    assert rates["cube_pyramid"] >= 11 / 12, rates
+    assert rates["cube_pyramid"] >= 7 / 8, rates
 
 
 # --- checked demonstrations -------------------------------------------------------------------
