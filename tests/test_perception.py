@@ -465,6 +465,22 @@ def test_d_cluster_sums_its_terms_over_their_scales():
     assert d_cluster(a, b, _PARAMS) == pytest.approx(d_h + d_e)  # the term off
 
 
+def test_extents_closer_than_the_tolerance_are_equal_and_the_rest_is_compared():
+    """``extent_tolerance``: a 4 cm wide box seen 3.3 cm wide from right above (its sides out
+    of sight, the edge pixels dropped) differs by ln(3.8 / 3.3) in width with 2 mm, not
+    ln(4 / 3.3), and not at all in length (2 mm); with 8 mm the term is 0; off (0), the
+    plain log-ratio."""
+    h = np.r_[np.ones(12), np.zeros(12)]
+    taught = _cluster(h, np.array([0.14, 0.04, 0.05]))
+    seen = _cluster(h, np.array([0.142, 0.033, 0.05]))
+    p = dataclasses.replace(_PARAMS, extent_tolerance=0.002)
+    assert d_cluster(taught, seen, p) == pytest.approx(np.log(0.038 / 0.033) / p.extent_scale)
+    assert d_cluster(seen, taught, p) == d_cluster(taught, seen, p)
+    assert d_cluster(taught, seen, _PARAMS) == pytest.approx(np.log(0.04 / 0.033) / 2.5)
+    wide = dataclasses.replace(p, extent_tolerance=0.008)
+    assert d_cluster(taught, seen, wide) == 0.0
+
+
 @settings(max_examples=50, deadline=None)
 @given(st.lists(st.tuples(_hist, _ext), min_size=1, max_size=4), st.lists(_hist, min_size=1))
 def test_the_distance_matrix_is_d_cluster_pairwise(rows, hists):
@@ -472,7 +488,7 @@ def test_the_distance_matrix_is_d_cluster_pairwise(rows, hists):
     point computes, and each entry of the matrix is the pair's :func:`d_cluster`."""
     from smccli.perception.distance import ClusterTerms, d_cluster_matrix, unmeasured
 
-    p = dataclasses.replace(_PARAMS, brightness_scale=4.0)
+    p = dataclasses.replace(_PARAMS, brightness_scale=4.0, extent_tolerance=0.004)
     a = [dataclasses.replace(_cluster(h, e), brightness=1.0 + k) for k, (h, e) in enumerate(rows)]
     b = [_cluster(h, np.array([0.05, 0.04, 0.03])) for h in hists]  # brightness unknown
     m = d_cluster_matrix(ClusterTerms.of(a), ClusterTerms.of(b), p)

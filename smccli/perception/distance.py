@@ -36,6 +36,17 @@ def d_extents(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(log_extents(a) - log_extents(b))))
 
 
+def _d_extents_matrix(a: np.ndarray, b: np.ndarray, tolerance: float) -> np.ndarray:
+    """(A, B): :func:`d_extents` of log-extents ``a`` (A, 3) and ``b`` (B, 3), each side's
+    difference first shrunk by ``tolerance`` [m] (none below 0): ln((larger - tolerance) /
+    smaller)."""
+    diff = np.abs(a[:, None, :] - b[None, :, :])
+    if tolerance > 0:
+        smaller = np.exp(np.minimum(a[:, None, :], b[None, :, :]))
+        diff = np.log(np.maximum(np.exp(diff) - tolerance / smaller, 1.0))
+    return diff.max(axis=2)
+
+
 @dataclass(frozen=True)
 class ClusterTerms:
     """What :func:`d_cluster_matrix` compares of N clusters, stacked (some rows may stand
@@ -97,7 +108,7 @@ def d_cluster_matrix(a: ClusterTerms, b: ClusterTerms, params: PerceptionParams)
     part (eq. 15).
     """
     d_h = d_bhattacharyya(a.sqrt_hist @ b.sqrt_hist.T)
-    d_e = np.abs(a.log_extents[:, None, :] - b.log_extents[None, :, :]).max(axis=2)
+    d_e = _d_extents_matrix(a.log_extents, b.log_extents, params.extent_tolerance)
     d = d_h / params.hist_scale + d_e / params.extent_scale
     if params.brightness_scale > 0:
         d_b = np.abs(a.log_brightness[:, None] - b.log_brightness[None, :])
