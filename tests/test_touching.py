@@ -5,6 +5,7 @@ look-alike family's trials (development seed 0); ground truth only in assertions
 
 from __future__ import annotations
 
+import dataclasses
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -64,6 +65,13 @@ def _taught(tree_file):
 
     tree = load_tree(tree_file)
     return next(e for e in tree.edges if e.smc.action.event == "close").smc.perception.cluster
+
+
+def _exact(params):
+    """``params`` without the extent tolerance: the case the windows were made for. With
+    it (stop 54) the white box's own piece passes first in seed 0's 107 and seed 2's 156
+    (D_P 0.096, 0.097; on the white box, as the windows' are)."""
+    return dataclasses.replace(params, extent_tolerance=0.0)
 
 
 def _size(cluster) -> tuple[float, float]:
@@ -146,7 +154,7 @@ def test_the_end_of_a_piece_too_long_is_the_white_box(clumsy_tree_2, tmp_path) -
         draw = la.draw_trial(la.learning_scene(), 2, i)
         layout, frame, robot = _trial_view(draw, tmp_path / str(i))
         seen = clusters_from_frame(frame, robot, params) + cluster_splits(frame, robot, params)
-        assert min(d_cluster(c, taught, params) for c in seen) >= T_HP, f"trial {i}"
+        assert min(d_cluster(c, taught, _exact(params)) for c in seen) >= T_HP, f"trial {i}"
         ends = cluster_windows(frame, robot, params, sizes=(_size(taught),))
         _white_box_and_not_the_lookalike(ends, taught, params, draw, layout, 0.03)
 
@@ -160,7 +168,7 @@ def test_the_side_of_a_piece_too_wide_is_the_white_box(clumsy_tree_0, tmp_path) 
     draw = la.draw_trial(la.learning_scene(), 0, SIDE)
     layout, frame, robot = _trial_view(draw, tmp_path / "side")
     seen = clusters_from_frame(frame, robot, params) + cluster_splits(frame, robot, params)
-    assert min(d_cluster(c, taught, params) for c in seen) >= T_HP
+    assert min(d_cluster(c, taught, _exact(params)) for c in seen) >= T_HP
     found = cluster_windows(frame, robot, params, sizes=(_size(taught),), ends_only=False)
     _white_box_and_not_the_lookalike(found, taught, params, draw, layout, 0.03)
 
