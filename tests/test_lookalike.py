@@ -3,6 +3,7 @@ checked against MuJoCo's own geometry; and two trials end to end on one clumsy d
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 
@@ -11,10 +12,12 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
-from conftest import TWIN_THRESHOLD  # noqa: E402
+from conftest import TWIN_THRESHOLD, first_view  # noqa: E402
 
 from smccli.bench import lookalike as la  # noqa: E402
 from smccli.execute.evaluation import OUTCOMES  # noqa: E402
+from smccli.learn.tree import load_tree  # noqa: E402
+from smccli.perception import clusters_from_frame, d_cluster  # noqa: E402
 from smccli.world.geometry import yaw_quat  # noqa: E402
 
 BOX = '<geom type="box" size="{} {} {}" pos="{} {} 0" euler="0 0 {}"/>'
@@ -199,13 +202,6 @@ def test_the_white_box_seen_narrow_from_above_is_still_the_white_box(clumsy_tree
     tolerance every view's D_P to the taught one stays 0.03 below T_hP; without it the
     worst sits at T_hP (development operator 10, whose taught view is as wide, stopped at 5
     of its 128 goal-band trials so before stop 54)."""
-    import dataclasses
-
-    from conftest import first_view
-
-    from smccli.learn.tree import load_tree
-    from smccli.perception import clusters_from_frame, d_cluster
-
     tree = load_tree(clumsy_tree_2)
     taught = next(e for e in tree.edges if e.smc.action.event == "close").smc.perception.cluster
     params = tree.params.perception

@@ -26,20 +26,21 @@ def log_extents(extents: np.ndarray) -> np.ndarray:
     return np.log(np.maximum(np.asarray(extents, dtype=np.float64), MIN_EXTENT))
 
 
-def d_extents(a: np.ndarray, b: np.ndarray) -> float:
+def d_extents(a: np.ndarray, b: np.ndarray, tolerance: float = 0.0) -> float:
     """Largest log-ratio of (length, width, height), shape (3,) [m]: relative, symmetric.
 
     |ln(a/b)| treats a 2 cm -> 2.4 cm change like 10 cm -> 12 cm (about 0.18), which is
     what the measurement error of a depth camera looks like (pixels, not millimetres).
     The footprint sides are sorted (length >= width), so yaw does not matter.
+    ``tolerance`` [m]: see :func:`_d_extents_matrix`.
     """
-    return float(np.max(np.abs(log_extents(a) - log_extents(b))))
+    return float(_d_extents_matrix(log_extents(a)[None], log_extents(b)[None], tolerance)[0, 0])
 
 
 def _d_extents_matrix(a: np.ndarray, b: np.ndarray, tolerance: float) -> np.ndarray:
     """(A, B): :func:`d_extents` of log-extents ``a`` (A, 3) and ``b`` (B, 3), each side's
     difference first shrunk by ``tolerance`` [m] (none below 0): ln((larger - tolerance) /
-    smaller)."""
+    smaller) (``PerceptionParams.extent_tolerance``)."""
     diff = np.abs(a[:, None, :] - b[None, :, :])
     if tolerance > 0:
         smaller = np.exp(np.minimum(a[:, None, :], b[None, :, :]))
