@@ -524,10 +524,13 @@ def test_mobile_manipulator_switches_base_and_arm_with_tab(tmp_path, display):
     stands; Enter keeps the log, whose commands carry both targets."""
     with _recording(tmp_path, display, "loco_manip") as (out, env, win, err):
         assert "Tab switches base/arm" in "".join(err.seen)
+        # Up held for 1-2 s of simulation (status lines come once per simulated second, so
+        # wait_sim(1.0) could end at once): the target runs 0.4-0.8 m. Released, the base
+        # coasts onto it for about 1 s before Tab hands the keys to the arm.
         subprocess.run(["xdotool", "keydown", "Up"], env=env, check=True)
-        err.wait_sim(1.0)
+        err.wait_sim(2.0)
         subprocess.run(["xdotool", "keyup", "Up"], env=env, check=True)
-        err.wait_sim(0.5)
+        err.wait_sim(1.5)
         _keys(env, win, "Tab", "Up", "Up", "Up", "Prior", "Prior", "Tab", "Return")
         err.proc.wait(timeout=90)
         code, stderr = err.proc.returncode, err.rest()
