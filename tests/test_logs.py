@@ -305,7 +305,11 @@ def test_wall_clock_flush_when_log_time_stalls(tmp_path: Path) -> None:
         for k in range(5):
             w.write_weight(k / 100, 1.0)
         before = w.size_bytes
-        time.sleep(0.6)
+        # The flush thread wakes every 0.05 s; a busy machine may delay it, so wait for
+        # the chunk (not a fixed 0.6 s) with a deadline no scheduler delay reaches.
+        deadline = time.monotonic() + 60.0
+        while w.size_bytes == before and time.monotonic() < deadline:
+            time.sleep(0.05)
         assert w.size_bytes > before
         assert len(read_log(part_path(path), on_warning=lambda m: None).weight) == 5
 
