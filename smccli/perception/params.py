@@ -85,11 +85,12 @@ class PerceptionParams:
     then sits at a 28 % size difference (with the colours equal)."""
     extent_tolerance: float = field(default=0.0, metadata={"omit_default": True})
     """What an extent measured from pixels is known to [m]: two extents closer than this are
-    equal, farther ones compared on what is left (:func:`~smccli.perception.distance.
-    d_cluster_matrix`). 0 = exact (the default). A box's width seen with a side face in view
-    is its footprint's; seen with its sides out of sight, only the top face's pixel centres
-    less the edge pixels a noisy camera drops (``bench_pick_lookalike``'s 4 cm box: 3.3-4.2
-    cm over 14 operators, stop 54): 0.004 there."""
+    equal, farther ones compared on what is left
+    (:func:`~smccli.perception.distance.d_cluster_matrix`). 0 = exact (the default). A
+    box's width seen with a side face in view is its footprint's; seen with its sides out
+    of sight, only the top face's pixel centres less the edge pixels a noisy camera drops
+    (``bench_pick_lookalike``'s 4 cm box: 3.3-4.2 cm over 14 operators, stop 54): 0.004
+    there."""
     brightness_ring: float = field(default=0.15, metadata={"omit_default": True})
     """The table within this of an object's centre is its brightness reference [m]
     (:mod:`smccli.perception.brightness`): the spot light falls off across the table."""
